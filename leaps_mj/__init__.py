@@ -1,0 +1,31 @@
+"""RoomNav-MJ and LEAPS: semantic multi-room navigation in MuJoCo.
+
+Importing the package picks an off-screen OpenGL backend for MuJoCo when
+``MUJOCO_GL`` is unset (EGL if Mesa's or a vendor's libEGL is present, else
+OSMesa), because dm_control reads that variable once, at import.
+"""
+
+import ctypes.util
+import os
+
+
+def _default_gl_backend() -> str:
+    if ctypes.util.find_library("EGL"):
+        return "egl"
+    return "osmesa"
+
+
+os.environ.setdefault("MUJOCO_GL", _default_gl_backend())
+if os.environ["MUJOCO_GL"] == "osmesa":
+    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+elif os.environ["MUJOCO_GL"] == "egl":
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+__version__ = "0.1.0"
+
+
+def load(*args, **kwargs):
+    """Builds a RoomNav environment; see :func:`leaps_mj.env.load`."""
+    from leaps_mj import env
+
+    return env.load(*args, **kwargs)

@@ -1,0 +1,114 @@
+"""One-pass off-screen rendering of segmentation and depth.
+
+With the scene flags ``mjRND_SEGMENT`` and ``mjRND_IDCOLOR`` MuJoCo paints each
+geom in a colour that encodes its index in the scene, and ``mjr_readPixels``
+returns that colour buffer and the depth buffer from the same draw: both
+observations for the price of one render (``mujoco.Renderer`` needs two).
+The segment index is mapped to a geom id, then through a lookup table to a
+segmentation class and to the geom's "see" mask.
+
+The OpenGL backend is whatever ``MUJOCO_GL`` names (``leaps_mj`` picks EGL or
+OSMesa when unset); a clear error lists what was tried when none works.
+"""
+
+from __future__ import annotations
+
+import os
+
+import mujoco
+import numpy as np
+
+from leaps_mj import mjcf as house_mjcf
+
+
+class RenderError(RuntimeError):
+    """No off-screen OpenGL context could be created."""
+
+
+def make_context(width: int, height: int) -> "mujoco.GLContext":
+    """An off-screen GL context for the backend in ``MUJOCO_GL``.
+
+    Raises:
+      RenderError: naming the backend tried and how to pick another.
+    """
+    backend = os.environ.get("MUJOCO_GL", "")
+    try:
+        ctx = mujoco.GLContext(width, height)
+        ctx.make_current()
+    except Exception as e:  # noqa: BLE001 - backend errors come in many types
+        raise RenderError(
+            f"could not create an off-screen OpenGL context with MUJOCO_GL={backend!r} ({e}); "
+            "tried that backend only: set MUJOCO_GL=egl (Mesa or NVIDIA libEGL) or MUJOCO_GL=osmesa "
+            "(apt-get install libosmesa6) before importing leaps_mj"
+        ) from e
+    return ctx
+
+
+class SegDepthRenderer:
+    """Renders (segment geom id, depth) images from a named camera.
+
+    Args:
+      model: the compiled house model.
+      width, height: image size in pixels.
+      camera: name of the camera to render from.
+    """
+
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = "agent/eye"):
+        if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+            raise ValueError(
+                f"resolution {width}x{height} exceeds the model's off-screen buffer "
+                f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}"
+            )
+        self.model = model
+        self.width, self.height = width, height
+        self._ctx = make_context(width, height)
+        self._mjr = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._mjr)
+        self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + 10)
+        self._scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+        self._scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+        self._opt = mujoco.MjvOption()
+        self._opt.geomgroup[house_mjcf.AGENT_GROUP] = 0
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._cam.fixedcamid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+        if self._cam.fixedcamid < 0:
+            raise ValueError(f"camera {camera!r} not in the model")
+        self._pert = mujoco.MjvPerturb()
+        self._rect = mujoco.MjrRect(0, 0, width, height)
+        self._rgb = np.empty((height, width, 3), dtype=np.uint8)
+        self._depth = np.empty((height, width), dtype=np.float32)
+        extent = model.stat.extent
+        self._near = model.vis.map.znear * extent
+        self._far = model.vis.map.zfar * extent
+        self._lut = None
+
+    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Geom ids (-1 where nothing was hit) and depth in metres, both (H, W)."""
+        self._ctx.make_current()
+        mujoco.mjv_updateScene(self.model, data, self._opt, self._pert, self._cam,
+                               mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+        mujoco.mjr_render(self._rect, self._scene, self._mjr)
+        mujoco.mjr_readPixels(self._rgb, self._depth, self._rect, self._mjr)
+        # Segment colour → scene geom index (+1; 0 is background) → model geom id.
+        seg = (self._rgb[..., 0].astype(np.int32) | (self._rgb[..., 1].astype(np.int32) << 8)
+               | (self._rgb[..., 2].astype(np.int32) << 16))
+        geom_ids = self._segment_lut()[np.minimum(seg, self._scene.ngeom)][::-1]
+        # OpenGL depth buffer (0..1, non-linear) → metres along the view axis.
+        depth = self._near / (1.0 - self._depth * (1.0 - self._near / self._far))
+        return geom_ids, depth[::-1].astype(np.float32)
+
+    def _segment_lut(self) -> np.ndarray:
+        """Scene index + 1 → model geom id; cached, as the scene's geom list is
+        the same every frame for a fixed model and fixed visual options."""
+        ngeom = self._scene.ngeom
+        if self._lut is None or len(self._lut) != ngeom + 1:
+            self._lut = np.array([-1] + [self._scene.geoms[i].objid for i in range(ngeom)], dtype=np.int32)
+        return self._lut
+
+    def close(self) -> None:
+        """Frees the GL resources (safe to call twice)."""
+        if self._mjr is not None:
+            self._mjr.free()
+            self._mjr = None
+            self._ctx.free()
