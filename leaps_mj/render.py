@@ -51,9 +51,12 @@ class SegDepthRenderer:
       model: the compiled house model.
       width, height: image size in pixels.
       camera: name of the camera to render from.
+      context: a GL context to share (one per process is enough); a new one
+        is made, and owned, when None.
     """
 
-    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = "agent/eye"):
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = "agent/eye",
+                 context: "mujoco.GLContext | None" = None):
         if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
             raise ValueError(
                 f"resolution {width}x{height} exceeds the model's off-screen buffer "
@@ -61,7 +64,9 @@ class SegDepthRenderer:
             )
         self.model = model
         self.width, self.height = width, height
-        self._ctx = make_context(width, height)
+        self._owns_ctx = context is None
+        self._ctx = make_context(width, height) if context is None else context
+        self._ctx.make_current()
         self._mjr = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._mjr)
         self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + 10)
@@ -98,6 +103,21 @@ class SegDepthRenderer:
         depth = self._near / (1.0 - self._depth * (1.0 - self._near / self._far))
         return geom_ids, depth[::-1].astype(np.float32)
 
+    def render_rgb(self, data: mujoco.MjData) -> np.ndarray:
+        """A colour image (H, W, 3) uint8 from the same camera (a second pass)."""
+        self._ctx.make_current()
+        for flag in (mujoco.mjtRndFlag.mjRND_SEGMENT, mujoco.mjtRndFlag.mjRND_IDCOLOR):
+            self._scene.flags[flag] = False
+        try:
+            mujoco.mjv_updateScene(self.model, data, self._opt, self._pert, self._cam,
+                                   mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+            mujoco.mjr_render(self._rect, self._scene, self._mjr)
+            mujoco.mjr_readPixels(self._rgb, None, self._rect, self._mjr)
+        finally:
+            for flag in (mujoco.mjtRndFlag.mjRND_SEGMENT, mujoco.mjtRndFlag.mjRND_IDCOLOR):
+                self._scene.flags[flag] = True
+        return self._rgb[::-1].copy()
+
     def _segment_lut(self) -> np.ndarray:
         """Scene index + 1 → model geom id; cached, as the scene's geom list is
         the same every frame for a fixed model and fixed visual options."""
@@ -109,6 +129,8 @@ class SegDepthRenderer:
     def close(self) -> None:
         """Frees the GL resources (safe to call twice)."""
         if self._mjr is not None:
+            self._ctx.make_current()
             self._mjr.free()
             self._mjr = None
-            self._ctx.free()
+            if self._owns_ctx:
+                self._ctx.free()
