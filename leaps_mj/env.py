@@ -62,6 +62,10 @@ class EnvConfig:
         geodesic metres from the target (curriculum / short training episodes).
       min_start_distance: sampled starts are at least this far (metres).
       cache_size: compiled houses kept (physics + renderer).
+      pixels: render segmentation and depth. False gives a "blind" fast
+        environment (images all zero, the see test cannot pass except for
+        outdoor) for work that needs only poses and semantic bits, such as
+        learning the prior by random exploration.
     """
 
     width: int = 120
@@ -75,6 +79,7 @@ class EnvConfig:
     max_start_distance: float | None = None
     min_start_distance: float = 0.0
     cache_size: int = 32
+    pixels: bool = True
 
     def __post_init__(self):
         if not (isinstance(self.width, int) and isinstance(self.height, int)) or not (
@@ -374,6 +379,13 @@ class RoomNav(base.Task):
 
     def _render(self, physics):
         hm = self.house_model
+        if not self.config.pixels:
+            shape = (self.config.height, self.config.width)
+            self.geom_ids = np.full(shape, -1, dtype=np.int32)
+            self.segmentation = np.zeros(shape, dtype=np.uint8)
+            self.depth = np.zeros(shape, dtype=np.float32)
+            self.target_fraction = 0.0
+            return
         geom_ids, depth = self._env.renderer.render(physics.data.ptr)
         self.geom_ids = geom_ids
         self.segmentation = hm.seg_lut[geom_ids + 1]
