@@ -43,36 +43,58 @@ ASSETS_DIR = pathlib.Path(__file__).resolve().parent.parent / "assets"
 FORMAT_VERSION = 1
 
 #: Door probability between two rooms that share a wall, by type pair (the
-#: hallway always gets one). Unlisted pairs get ``_DEFAULT_DOOR_P``.
+#: hallway's doors are in ``_HALL_DOOR_P``). Unlisted pairs get
+#: ``_DEFAULT_DOOR_P``. Keys are normalised to sorted order below.
 _DOOR_P = {
     ("kitchen", "dining_room"): 0.9,
-    ("dining_room", "living_room"): 0.85,
-    ("living_room", "office"): 0.6,
+    ("dining_room", "living_room"): 0.8,
+    ("living_room", "office"): 0.7,
     ("kitchen", "living_room"): 0.5,
     ("bathroom", "bedroom"): 0.45,
-    ("kitchen", "office"): 0.15,
-    ("dining_room", "office"): 0.15,
+    ("kitchen", "office"): 0.3,
+    ("dining_room", "office"): 0.2,
     ("garage", "indoor"): 0.6,
     ("garage", "kitchen"): 0.35,
     ("indoor", "kitchen"): 0.3,
     ("indoor", "living_room"): 0.5,
+    ("bathroom", "living_room"): 0.1,
     ("bedroom", "garage"): 0.0,
     ("bathroom", "garage"): 0.0,
 }
+_DOOR_P = {tuple(sorted(k)): v for k, v in _DOOR_P.items()}
 _DEFAULT_DOOR_P = 0.05
+#: Door probability between the hallway and a room on it, by the room's type.
+#: Below 1, the room may be reached through a neighbour instead (a kitchen
+#: through the dining room, an en-suite bathroom through its bedroom); the
+#: connectivity repair adds the hallway door when it is not.
+_HALL_DOOR_P = {
+    "kitchen": 0.75,
+    "dining_room": 0.8,
+    "living_room": 0.9,
+    "office": 0.85,
+    "bathroom": 0.85,
+    "bedroom": 1.0,
+    "garage": 0.55,
+    "indoor": 1.0,
+}
 
 #: Width range (metres, along the row) per room type.
 _WIDTH = {
     "kitchen": (3.0, 4.5),
-    "dining_room": (3.0, 4.2),
+    "dining_room": (3.3, 4.5),
     "living_room": (4.0, 6.0),
     "office": (2.6, 3.6),
     "bedroom": (3.0, 4.5),
     "bathroom": (2.2, 3.0),
     "indoor": (1.8, 2.6),
+    "foyer": (1.8, 2.4),
     "garage": (3.8, 5.0),
 }
 _MAX_TRIES = 40
+#: Lowest height of hanging items (wall cabinets) in the catalogue.
+_HANGING_Z = 1.45
+#: Layout attempts per sampled programme before a new programme is drawn.
+_LAYOUT_TRIES = 10
 #: Shortest wall that takes a door (door plus 0.25 m each side).
 _MIN_DOOR_WALL = rooms.DOOR_WIDTH + 0.5
 
@@ -325,18 +347,30 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
             private.append(baths.pop())
     if prog["indoor_extra"]:
         private.insert(int(rng.integers(0, len(private) + 1)), "indoor")
-    office = ["office"] if prog["office"] else []
-
-    widths = {}
-
     def width(t):
         lo, hi = _WIDTH[t]
         return float(rng.uniform(lo, hi))
 
-    # Office near the living room: first in the south row when the living room
-    # is at the west end or leads the north row.
+    # The office opens off the living room (commonest) or the kitchen, else
+    # it heads the other row. ``public`` starts at the west end (the
+    # full-depth living room, when there is one, is further west still).
     north = list(public)
-    south = list(office)
+    south = []
+    if prog["office"]:
+        u = rng.random()
+        if full_west and u < 0.7:
+            # Both rows start beside the full-depth living room.
+            (north if rng.random() < 0.5 else south).insert(0, "office")
+        elif "living_room" in north and u < 0.7:
+            north.insert(0 if north[0] == "living_room" else len(north), "office")
+        elif u < 0.85:
+            north.insert(0 if north[0] == "kitchen" else len(north), "office")
+        else:
+            south.append("office")
+    # A house whose hallway has no outside end (a full-depth living room at
+    # one end, the garage at the other) gets an entry foyer in the public row.
+    if full_west and prog["garage"]:
+        north.insert(int(rng.integers(1, len(north) + 1)), "foyer")
     # Split the private wing to balance the row lengths.
     nw = [width(t) for t in north]
     sw = [width(t) for t in south]
@@ -367,10 +401,12 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
 
     depth_s = float(rng.uniform(3.2, 4.8))
     depth_n = float(rng.uniform(3.2, 4.8))
-    hall = float(rng.uniform(1.3, 1.7))
+    # Wide enough for a door at its ends (door plus 0.25 m each side).
+    hall = float(rng.uniform(1.5, 1.8))
     depth = depth_s + hall + depth_n
     x = 0.0
     out: list[tuple[str, tuple]] = []
+    foyer = None
     if full_west:
         w = width(full_west) + 1.0
         west_room = (full_west, (0.0, 0.0, w, depth))
@@ -382,6 +418,9 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
     for names, ws, y0, y1 in ((south, sw, 0.0, depth_s), (north, nw, depth_s + hall, depth)):
         cx = x
         for t, w in zip(names, ws):
+            if t == "foyer":
+                foyer = len(out)
+                t = "indoor"
             out.append((t, (cx, y0, cx + w, y1)))
             cx += w
     x_end = x + row_len
@@ -392,7 +431,7 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
         total = max(r[2] for _, r in out)
         out = [(t, (total - r[2], r[1], total - r[0], r[3])) for t, r in out]
     out = [(t, tuple(round(v, 2) for v in r)) for t, r in out]
-    return out, {"depth": depth}
+    return out, {"depth": depth, "foyer": foyer}
 
 
 def _shared_edge(a, b, min_len):
@@ -460,7 +499,7 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
             if edge is None:
                 continue
             if hall_id in (a, b):
-                p = 1.0 if "garage" not in (ta, tb) else door_probability(ta, tb)
+                p = _HALL_DOOR_P[tb if a == hall_id else ta]
             else:
                 p = door_probability(ta, tb)
             if rng.random() < p:
@@ -470,7 +509,9 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
     # Repair connectivity: join each unreachable room to its best neighbour.
     for _ in range(n):
         reach = _reachable(n, linked, hall_id, skip=outdoor_id)
-        missing = [i for i in range(n) if i not in reach and i != outdoor_id]
+        # A garage may be reached from the yard alone (its side door).
+        missing = [i for i in range(n) if i not in reach and i != outdoor_id
+                   and not (plan_rooms[i][0] == "garage" and outdoor_id >= 0)]
         if not missing:
             break
         best = None
@@ -509,7 +550,7 @@ class _Retry(Exception):
     """A sampled layout cannot be completed; the generator draws another."""
 
 
-def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id):
+def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id, foyer=None):
     """Front door, optional back door and the garage's doors to the yard.
 
     Returns:
@@ -536,17 +577,18 @@ def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id):
 
     types = [t for t, _ in plan_rooms]
     # Front door: the hallway end if it reaches the outside, else a public room.
-    order = [0] + [i for i, t in enumerate(types) if t == "living_room"]
+    order = [0] + ([foyer] if foyer is not None else [])
+    order += [i for i, t in enumerate(types) if t == "living_room"]
     order += [i for i, t in enumerate(types) if t in ("dining_room", "kitchen")]
     order += list(range(1, len(types)))
-    if rng.random() < 0.35 and "living_room" in types:
+    if rng.random() < 0.12 and "living_room" in types:
         order.insert(0, types.index("living_room"))
     for i in order:
         if i != outdoor_id and types[i] != "garage" and place(i):
             break
     else:
         raise _Retry("no room can take a front door")
-    if "kitchen" in types and rng.random() < 0.3:
+    if "kitchen" in types and rng.random() < 0.15:
         place(types.index("kitchen"))
     if "garage" in types:
         g = types.index("garage")
@@ -648,7 +690,7 @@ def _overlap(a, b, pad=0.0):
     return a[0] < b[2] + pad and b[0] < a[2] + pad and a[1] < b[3] + pad and b[1] < a[3] + pad
 
 
-def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad):
+def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad, tall=(), hanging=()):
     """Samples a pose for one item; returns (footprint, frame) or None.
 
     ``frame`` is (origin xy, along unit vector, inward unit vector, w, d, h).
@@ -666,7 +708,7 @@ def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad):
             else:
                 along, inward = np.array([0.0, 1.0]), np.array([-1.0, 0.0])
                 fw, fd = d, w
-            m = 0.8
+            m = 0.65  # room to walk round: the agent is 0.4 m across
             if ix1 - ix0 - 2 * m < fw or iy1 - iy0 - 2 * m < fd:
                 continue
             fx = float(rng.uniform(ix0 + m, ix1 - m - fw))
@@ -691,6 +733,11 @@ def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad):
         if any(_overlap(fp, z) for z in zones):
             continue
         if place != "hanging" and not spec.get("walkable") and any(_overlap(fp, b, 0.05) for b in blocked):
+            continue
+        # A wall cabinet never cuts into a fridge or a pantry.
+        if place == "hanging" and any(_overlap(fp, b) for b in tall):
+            continue
+        if place != "hanging" and spec.get("z", 0.0) + h > _HANGING_Z and any(_overlap(fp, b) for b in hanging):
             continue
         return fp, (origin, along, inward, w, d, h)
     return None
@@ -730,6 +777,8 @@ def _furnish(rng, house_rooms, doors, walls, lot):
     cat = catalogue()
     zones = _door_zones(doors)
     blocked = [w.rect for w in walls]
+    tall = []  # footprints of items reaching the height of wall cabinets
+    hanging = []  # floor rectangles under wall cabinets
     items = []
     indoor_rects = [r.rect for r in house_rooms if r.type != "outdoor"]
     for room in house_rooms:
@@ -746,7 +795,8 @@ def _furnish(rng, house_rooms, doors, walls, lot):
             if room.type == "outdoor":
                 fp_frame = _place_tree(rng, spec, lot, indoor_rects, blocked, zones)
             else:
-                fp_frame = _place_item(rng, key, spec, room.rect, blocked, zones, rooms.WALL_THICKNESS / 2 + 0.06)
+                fp_frame = _place_item(rng, key, spec, room.rect, blocked, zones,
+                                       rooms.WALL_THICKNESS / 2 + 0.06, tall, hanging)
             if fp_frame is None:
                 if key in plan["required"]:
                     raise _Retry(f"no room for required {key} in {room.name}")
@@ -755,8 +805,12 @@ def _furnish(rng, house_rooms, doors, walls, lot):
             item_id = len(items)
             no_footprint = spec["place"] == "hanging" or spec.get("walkable", False)
             footprint = None if no_footprint else tuple(round(float(v), 3) for v in fp)
+            if spec["place"] == "hanging":
+                hanging.append(fp)
             if footprint is not None:
                 blocked.append(footprint)
+                if spec.get("z", 0.0) + frame[5] > _HANGING_Z:
+                    tall.append(footprint)
             items.append(Item(
                 id=item_id, key=key, cls=spec["class"], room=room.id, room_type=room.type,
                 footprint=footprint,
@@ -802,9 +856,13 @@ def generate(seed: int, house_id: str = "house") -> House:
 
     rng = np.random.default_rng(seed)
     last = None
-    for _ in range(_MAX_TRIES):
+    for attempt in range(_MAX_TRIES):
+        # Layouts are redrawn for the same programme first, so that hard
+        # programmes (many rooms, a dining room) are not under-represented.
+        if attempt % _LAYOUT_TRIES == 0:
+            prog = sample_programme(rng)
         try:
-            house = _generate_once(rng, seed, house_id)
+            house = _generate_once(rng, seed, house_id, prog)
             navgrid.NavGrid(house).check_reachable()
             return house
         except (_Retry, navgrid.Unreachable) as e:
@@ -812,9 +870,8 @@ def generate(seed: int, house_id: str = "house") -> House:
     raise RuntimeError(f"house {house_id!r} (seed {seed}): no valid layout in {_MAX_TRIES} tries; last: {last}")
 
 
-def _generate_once(rng, seed, house_id) -> House:
-    prog = sample_programme(rng)
-    layout, _ = _floor_plan(rng, prog)
+def _generate_once(rng, seed, house_id, prog) -> House:
+    layout, facts = _floor_plan(rng, prog)
     house_rects = [r for _, r in layout]
     hx0 = min(r[0] for r in house_rects)
     hy0 = min(r[1] for r in house_rects)
@@ -831,7 +888,7 @@ def _generate_once(rng, seed, house_id) -> House:
     doors = _doors(rng, layout, 0, outdoor_id)
     panels = []
     if has_yard:
-        ext_doors, panels = _exterior_doors(rng, layout, house_rects, outdoor_id)
+        ext_doors, panels = _exterior_doors(rng, layout, house_rects, outdoor_id, facts["foyer"])
         doors += ext_doors
     counts: dict[str, int] = {}
     house_rooms = []

@@ -71,6 +71,10 @@ def build(house: houses.House) -> mjcf.RootElement:
     for i, w in enumerate(house.walls):
         name = f"{w.cls}__w{i}" if w.cls != "garage_door" else f"garage_door__garage__r{garage[0]}__w{i}"
         wb.add("geom", name=name, material=w.cls, **_box(w.rect, 0.0, w.height), **_STATIC)
+        if w.cls == "garage_door":
+            # The wall above the garage door, up to the ceiling.
+            wb.add("geom", name=f"wall__w{i}__lintel", material="wall",
+                   **_box(w.rect, w.height, rooms.WALL_HEIGHT), **_STATIC)
     t = rooms.WALL_THICKNESS
     for i, d in enumerate(house.doors):
         cx, cy = d.center
