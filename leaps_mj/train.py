@@ -1,0 +1,56 @@
+"""Training entry point: ``python -m leaps_mj.train <trainer> [options]``.
+
+Trainers (each a single-file module with its own ``main(argv)``, cleanrl style):
+
+  prior       learn the room-connectivity prior by random exploration (leaps_mj.train_prior)
+  obs-noise   grid-search the observation noise on the validation episodes (leaps_mj.tune_obs_noise)
+  policy      train per-target CNN+LSTM sub-policies (leaps_mj.train_policy)
+  classifier  train the CNN room-type classifier (leaps_mj.train_classifier)
+  controller  train the LSTM controller baseline (leaps_mj.train_controller)
+  all         reproduce the shipped checkpoints: prior, policy (every target), obs-noise
+
+``python -m leaps_mj.train <trainer> --help`` lists a trainer's options.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+TRAINERS = {
+    "prior": "leaps_mj.train_prior",
+    "obs-noise": "leaps_mj.tune_obs_noise",
+    "policy": "leaps_mj.train_policy",
+    "classifier": "leaps_mj.train_classifier",
+    "controller": "leaps_mj.train_controller",
+}
+#: What ``all`` runs, in order (each trainer resumes from its checkpoints).
+ALL = ("prior", "policy", "obs-noise")
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name == "all":
+        for step in ALL:
+            print(f"== python -m leaps_mj.train {step} {' '.join(rest)}", flush=True)
+            code = importlib.import_module(TRAINERS[step]).main(rest)
+            if code:
+                return code
+        return 0
+    if name not in TRAINERS:
+        print(f"unknown trainer {name!r}; expected one of {sorted(TRAINERS) + ['all']}", file=sys.stderr)
+        return 2
+    try:
+        module = importlib.import_module(TRAINERS[name])
+    except ModuleNotFoundError as e:
+        print(f"trainer {name!r} is not available: {e}", file=sys.stderr)
+        return 2
+    return module.main(rest) or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
