@@ -39,7 +39,7 @@ from dm_control.rl import control
 from dm_control.suite import base
 from dm_env import specs
 
-from leaps_mj import houses, mjcf, navgrid, render, rooms
+from leaps_mj import batching, houses, navgrid, render, rooms
 
 _SUBSTEP = 0.1  # metres per collision-checked increment of a move
 _NO_DISTANCE = 1e3  # geodesic distance reported where the target is unreachable
@@ -482,7 +482,7 @@ class RoomNavEnvironment(control.Environment):
             xml_path = path.with_suffix(".xml")
             try:
                 xml = xml_path.read_text()
-                physics = Physics.from_xml_string(xml)
+                physics = Physics.from_model(dm_mujoco.wrapper.MjModel(batching.compile_batched(xml)))
             except OSError as e:
                 raise ValueError(f"cannot read house model {str(xml_path)!r}: {e.strerror}") from None
             except Exception as e:  # noqa: BLE001 - MuJoCo raises ValueError/Error subclasses

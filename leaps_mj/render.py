@@ -64,6 +64,11 @@ class SegDepthRenderer:
             )
         self.model = model
         self.width, self.height = width, height
+        # No multisampling: it would blend segment colours at edges (and costs
+        # a third of the frame in software); coarse curved primitives.
+        model.vis.quality.offsamples = 0
+        model.vis.quality.numslices = 10
+        model.vis.quality.numstacks = 4
         self._owns_ctx = context is None
         self._ctx = make_context(width, height) if context is None else context
         self._ctx.make_current()
