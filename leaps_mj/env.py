@@ -459,7 +459,11 @@ class RoomNavEnvironment(control.Environment):
         self._gl = render.make_context(config.width, config.height)
         self.renderer = None
         self._task = RoomNav(self, config, random=seed)
-        first = self._activate(sorted(self._house_files)[0])
+        try:
+            first = self._activate(sorted(self._house_files)[0])
+        except Exception:
+            self.close()
+            raise
         super().__init__(first, self._task, time_limit=float("inf"), n_sub_steps=1)
 
     # -- houses ----------------------------------------------------------------
