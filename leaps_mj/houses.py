@@ -415,13 +415,21 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
     out.append(("indoor", hall_rect))
     if full_west:
         out.append(west_room)
-    for names, ws, y0, y1 in ((south, sw, 0.0, depth_s), (north, nw, depth_s + hall, depth)):
+    # Half of the houses have a stepped outline: some rooms are shallower
+    # than their row, their outer wall set back (the yard fills the notch).
+    stepped = rng.random() < 0.5
+    for names, ws, y0, y1, outer in ((south, sw, 0.0, depth_s, 0), (north, nw, depth_s + hall, depth, 1)):
         cx = x
         for t, w in zip(names, ws):
             if t == "foyer":
                 foyer = len(out)
                 t = "indoor"
-            out.append((t, (cx, y0, cx + w, y1)))
+            rect = [cx, y0, cx + w, y1]
+            max_cut = min(1.2, y1 - y0 - 3.0)
+            if stepped and max_cut >= 0.4 and rng.random() < 0.4:
+                cut = float(rng.uniform(0.4, max_cut))
+                rect[1 + 2 * outer] += cut if outer == 0 else -cut
+            out.append((t, tuple(rect)))
             cx += w
     x_end = x + row_len
     if prog["garage"]:
@@ -690,7 +698,7 @@ def _overlap(a, b, pad=0.0):
     return a[0] < b[2] + pad and b[0] < a[2] + pad and a[1] < b[3] + pad and b[1] < a[3] + pad
 
 
-def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad, tall=(), hanging=()):
+def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad, tall=(), hanging=(), sides=None):
     """Samples a pose for one item; returns (footprint, frame) or None.
 
     ``frame`` is (origin xy, along unit vector, inward unit vector, w, d, h).
@@ -717,7 +725,7 @@ def _place_item(rng, key, spec, room_rect, blocked, zones, inner_pad, tall=(), h
             origin = np.array([fp[0], fp[1]]) if inward[1] > 0 else np.array([fp[2], fp[1]])
         else:
             # Walls south, east, north, west: (corner, along, inward, length).
-            side = int(rng.integers(4))
+            side = int(rng.integers(4)) if sides is None else sides[int(rng.integers(len(sides)))]
             corner, along, inward, length = (
                 ((ix0, iy0), (1.0, 0.0), (0.0, 1.0), ix1 - ix0),
                 ((ix1, iy0), (0.0, 1.0), (-1.0, 0.0), iy1 - iy0),
@@ -790,18 +798,27 @@ def _furnish(rng, house_rooms, doors, walls, lot):
         if room.type == "bathroom":
             # A bathroom has a bathtub or a shower, rarely both.
             keys = [k for k in keys if k not in ("bathtub", "shower")] + [str(rng.choice(["bathtub", "shower"]))]
+        wall_side = {}  # catalogue key -> wall it stands against (0 S, 1 E, 2 N, 3 W)
         for key in keys:
             spec = cat["items"][key]
             if room.type == "outdoor":
                 fp_frame = _place_tree(rng, spec, lot, indoor_rects, blocked, zones)
             else:
-                fp_frame = _place_item(rng, key, spec, room.rect, blocked, zones,
-                                       rooms.WALL_THICKNESS / 2 + 0.06, tall, hanging)
+                args = (rng, key, spec, room.rect, blocked, zones, rooms.WALL_THICKNESS / 2 + 0.06, tall, hanging)
+                fp_frame = None
+                if spec.get("faces") in wall_side:
+                    # On the wall facing its partner (a television facing the sofa).
+                    fp_frame = _place_item(*args, sides=[(wall_side[spec["faces"]] + 2) % 4])
+                if fp_frame is None:
+                    fp_frame = _place_item(*args)
             if fp_frame is None:
                 if key in plan["required"]:
                     raise _Retry(f"no room for required {key} in {room.name}")
                 continue
             fp, frame = fp_frame
+            if spec["place"] == "wall":
+                inward = tuple(int(round(v)) for v in frame[2])
+                wall_side[key] = {(0, 1): 0, (-1, 0): 1, (0, -1): 2, (1, 0): 3}[inward]
             item_id = len(items)
             no_footprint = spec["place"] == "hanging" or spec.get("walkable", False)
             footprint = None if no_footprint else tuple(round(float(v), 3) for v in fp)
