@@ -337,7 +337,8 @@ class RoomNav(base.Task):
         self.success = False
         xy = spec.start[:2]
         self.distance = hm.geodesic(xy, spec.target)
-        self.in_target = bool(hm.semantic_bits(*xy)[self.target_index])
+        self.bits = hm.semantic_bits(*xy)
+        self.in_target = bool(self.bits[self.target_index])
         self._render(physics)
         self.prev_fraction = self.target_fraction
 
@@ -370,27 +371,27 @@ class RoomNav(base.Task):
         pose = physics.agent_pose()
         self.prev_distance, self.distance = self.distance, hm.geodesic(pose[:2], self.episode.target)
         self.was_in_target = self.in_target
-        bits = hm.semantic_bits(*pose[:2])
-        self.in_target = bool(bits[self.target_index])
+        self.bits = hm.semantic_bits(*pose[:2])
+        self.in_target = bool(self.bits[self.target_index])
         outdoor = self.episode.target == "outdoor"
         sees = self.in_target and (outdoor or self.target_fraction >= self.config.success_fraction)
         self.success_streak = self.success_streak + 1 if sees else 0
         self.success = self.success_streak >= self.config.success_steps
 
     def _render(self, physics):
-        hm = self.house_model
         if not self.config.pixels:
             shape = (self.config.height, self.config.width)
-            self.geom_ids = np.full(shape, -1, dtype=np.int32)
             self.segmentation = np.zeros(shape, dtype=np.uint8)
             self.depth = np.zeros(shape, dtype=np.float32)
             self.target_fraction = 0.0
             return
-        geom_ids, depth = self._env.renderer.render(physics.data.ptr)
-        self.geom_ids = geom_ids
-        self.segmentation = hm.seg_lut[geom_ids + 1]
-        self.depth = depth
-        self.target_fraction = float(hm.see_lut[self.target_index][geom_ids + 1].mean())
+        renderer = self._env.renderer
+        seg, depth = renderer.render_segments(physics.data.ptr)
+        class_lut, see_lut = self._env.segment_luts
+        self.segmentation = class_lut[seg]
+        self.depth = depth.astype(np.float32)
+        counts = np.bincount(seg.ravel(), minlength=len(class_lut))
+        self.target_fraction = float(counts @ see_lut[self.target_index]) / seg.size
 
     def get_observation(self, physics):
         pose = physics.agent_pose()
@@ -399,7 +400,7 @@ class RoomNav(base.Task):
         obs = collections.OrderedDict(
             segmentation=self.segmentation.copy(),
             depth=self.depth.copy(),
-            semantic=self.house_model.semantic_bits(*pose[:2]),
+            semantic=self.bits.copy(),
             target=target,
             collision=np.uint8(self.collision),
             pose=pose.astype(np.float32),
@@ -458,6 +459,7 @@ class RoomNavEnvironment(control.Environment):
         self._cache: collections.OrderedDict[str, tuple] = collections.OrderedDict()
         self._gl = render.make_context(config.width, config.height)
         self.renderer = None
+        self.segment_luts = None
         self._task = RoomNav(self, config, random=seed)
         try:
             first = self._activate(sorted(self._house_files)[0])
@@ -504,6 +506,9 @@ class RoomNavEnvironment(control.Environment):
             self._physics = physics
             self.renderer = rend
             self._task.house_model = hm
+            # Segment index → class and → counts for "see", via the scene's geoms.
+            geoms = rend.segment_geoms + 1
+            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms].astype(np.int64))
         return physics
 
     # -- episodes --------------------------------------------------------------

@@ -93,24 +93,60 @@ class SegDepthRenderer:
         self._far = model.vis.map.zfar * extent
         self._lut = None
 
-    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """Geom ids (-1 where nothing was hit) and depth in metres, both (H, W)."""
+    def _activate(self) -> None:
+        """Makes the GL context current and binds this renderer's framebuffer.
+
+        Renderers of several houses share one GL context; the bound offscreen
+        framebuffer is context state, so each frame binds its own.
+        """
         self._ctx.make_current()
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._mjr)
+
+    def render_segments(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Segment indices and depth in metres, both (H, W), top row first.
+
+        A segment index is 0 where nothing was hit, else 1 + the geom's index
+        in the scene; :attr:`segment_geoms` maps it to a model geom id. Indices
+        fit in uint8 while the scene has fewer than 255 geoms (batched houses
+        do), which keeps the per-pixel lookups of callers cheap.
+        """
+        self._activate()
         mujoco.mjv_updateScene(self.model, data, self._opt, self._pert, self._cam,
                                mujoco.mjtCatBit.mjCAT_ALL, self._scene)
         mujoco.mjr_render(self._rect, self._scene, self._mjr)
         mujoco.mjr_readPixels(self._rgb, self._depth, self._rect, self._mjr)
-        # Segment colour → scene geom index (+1; 0 is background) → model geom id.
-        seg = (self._rgb[..., 0].astype(np.int32) | (self._rgb[..., 1].astype(np.int32) << 8)
-               | (self._rgb[..., 2].astype(np.int32) << 16))
-        geom_ids = self._segment_lut()[np.minimum(seg, self._scene.ngeom)][::-1]
+        if self._scene.ngeom < 255:
+            seg = self._rgb[::-1, :, 0].copy()
+        else:
+            rgb = self._rgb[::-1].astype(np.int32)
+            seg = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
         # OpenGL depth buffer (0..1, non-linear) → metres along the view axis.
-        depth = self._near / (1.0 - self._depth * (1.0 - self._near / self._far))
-        return geom_ids, depth[::-1].astype(np.float32)
+        depth = self._near / (1.0 - self._depth[::-1] * (1.0 - self._near / self._far))
+        return seg, depth
+
+    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Geom ids (-1 where nothing was hit) and depth in metres, both (H, W)."""
+        seg, depth = self.render_segments(data)
+        return self.segment_geoms[seg], depth
+
+    @property
+    def segment_geoms(self) -> np.ndarray:
+        """Segment index → model geom id (-1 for nothing hit).
+
+        The scene's geom list is the same every frame for a fixed model and
+        fixed visual options, so it is read once, from a first scene update.
+        """
+        if self._lut is None:
+            if self._scene.ngeom == 0:
+                mujoco.mjv_updateScene(self.model, mujoco.MjData(self.model), self._opt, self._pert,
+                                       self._cam, mujoco.mjtCatBit.mjCAT_ALL, self._scene)
+            ngeom = self._scene.ngeom
+            self._lut = np.array([-1] + [self._scene.geoms[i].objid for i in range(ngeom)], dtype=np.int32)
+        return self._lut
 
     def render_rgb(self, data: mujoco.MjData) -> np.ndarray:
         """A colour image (H, W, 3) uint8 from the same camera (a second pass)."""
-        self._ctx.make_current()
+        self._activate()
         for flag in (mujoco.mjtRndFlag.mjRND_SEGMENT, mujoco.mjtRndFlag.mjRND_IDCOLOR):
             self._scene.flags[flag] = False
         try:
@@ -122,14 +158,6 @@ class SegDepthRenderer:
             for flag in (mujoco.mjtRndFlag.mjRND_SEGMENT, mujoco.mjtRndFlag.mjRND_IDCOLOR):
                 self._scene.flags[flag] = True
         return self._rgb[::-1].copy()
-
-    def _segment_lut(self) -> np.ndarray:
-        """Scene index + 1 → model geom id; cached, as the scene's geom list is
-        the same every frame for a fixed model and fixed visual options."""
-        ngeom = self._scene.ngeom
-        if self._lut is None or len(self._lut) != ngeom + 1:
-            self._lut = np.array([-1] + [self._scene.geoms[i].objid for i in range(ngeom)], dtype=np.int32)
-        return self._lut
 
     def close(self) -> None:
         """Frees the GL resources (safe to call twice)."""
