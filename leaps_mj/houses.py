@@ -408,7 +408,7 @@ def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tu
     out: list[tuple[str, tuple]] = []
     foyer = None
     if full_west:
-        w = width(full_west) + 1.0
+        w = width(full_west) + 0.5
         west_room = (full_west, (0.0, 0.0, w, depth))
         x = w
     hall_rect = (x, depth_s, x + row_len, depth_s + hall)
@@ -794,7 +794,9 @@ def _furnish(rng, house_rooms, doors, walls, lot):
         keys = list(plan["required"])
         opt = list(plan["optional"])
         rng.shuffle(opt)
-        keys += opt[: int(rng.integers(0, len(opt) + 1))]
+        # Big rooms (a full-depth living room) get at least two optional items.
+        min_opt = min(2, len(opt)) if room.type != "outdoor" and room.area > 30.0 else 0
+        keys += opt[: int(rng.integers(min_opt, len(opt) + 1))]
         if room.type == "bathroom":
             # A bathroom has a bathtub or a shower, rarely both.
             keys = [k for k in keys if k not in ("bathtub", "shower")] + [str(rng.choice(["bathtub", "shower"]))]
