@@ -27,8 +27,9 @@ topic                       schema                     content
 ==========================  =========================  ==========================================
 
 ``/step`` has one message per action (frames 1..T); the image, pose and
-semantic topics have T + 1 (frame 0 included); ``/belief`` topics appear when
-the agent's ``info()`` reports a belief or a plan. The file also holds
+semantic topics have T + 1 (frame 0 included); the ``/belief`` topics have a
+message whenever the belief, plan or sub-target of the agent's ``info()``
+changes (Foxglove shows the latest one at any time). The file also holds
 metadata records ``episode``, ``run_config`` and ``outcome`` and attachments
 ``<house>.xml`` (the MJCF), ``<house>.json`` (:meth:`House.to_json`) and
 ``run_config.json``.
@@ -126,7 +127,7 @@ _CODE_ORDER = np.argsort(_PALETTE_CODES)
 
 def colorize(segmentation: np.ndarray) -> np.ndarray:
     """(H, W) class ids -> (H, W, 3) uint8 colours of :data:`SEG_PALETTE`."""
-    return SEG_PALETTE[segmentation]
+    return np.take(SEG_PALETTE, segmentation, axis=0)
 
 
 def decolorize(rgb: np.ndarray) -> np.ndarray:
@@ -162,25 +163,20 @@ def _pose(x: float, y: float, z: float, quat: fm.Quaternion | None = None) -> fm
                    orientation=quat or fm.Quaternion(w=1.0))
 
 
-def _jsonable(value):
-    """Plain-JSON copy of a result value (numpy scalars and arrays, tuples, specs)."""
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+def _json_default(value):
+    """JSON form of what ``json`` cannot encode itself: numpy values, specs."""
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
         return value.item()
     if hasattr(value, "to_json"):
-        return _jsonable(value.to_json())
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
+        return value.to_json()
     return str(value)
 
 
 def _dumps(value) -> bytes:
-    return json.dumps(_jsonable(value), sort_keys=True, separators=(",", ":")).encode()
+    """Compact JSON with sorted keys: the same value always gives the same bytes."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=_json_default).encode()
 
 
 # -- the house and the belief as 3D scenes -------------------------------------
@@ -351,8 +347,8 @@ def episode_key(spec, agent_name: str, seed: int = 0) -> str:
 
     Read as a number in [0, 1) it is also the episode's sampling priority.
     """
-    blob = json.dumps({"agent": agent_name, "spec": _jsonable(spec), "seed": seed}, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+    blob = _dumps({"agent": agent_name, "spec": spec, "seed": seed})
+    return hashlib.sha256(blob).hexdigest()[:16]
 
 
 _KEY_RE = re.compile(r"_([0-9a-f]{16})\.mcap$")
@@ -406,7 +402,7 @@ class EpisodeRecorder:
         self.out = pathlib.Path(out)
         self.single = self.out.suffix == ".mcap"
         self.env = env
-        self.run_config = _jsonable(dict(run_config or {}))
+        self.run_config = json.loads(_dumps(dict(run_config or {})))
         self.keep = keep
         self.seed = seed
         self._sample = _parse_keep(keep)
@@ -469,6 +465,7 @@ class EpisodeRecorder:
         self._return = 0.0
         self._last = None
         self._subtargets: list[str] = []
+        self._belief_key = None
         self._first_obs = env.task.get_observation(env.physics) if hasattr(env, "task") else None
         episode = {"spec": spec.to_json(), "agent": self._agent_name, "key": key, "run_config": self.run_config}
         meta = {"house": spec.house, "target": spec.target, "agent": self._agent_name, "key": key,
@@ -534,9 +531,9 @@ class EpisodeRecorder:
         success = bool(self._last is not None and self._last.last() and self._last.discount == 0.0)
         outcome = {"success": success, "steps": self._frame, "return": self._return,
                    "subtargets": self._subtargets, "agent": self._agent_name,
-                   "house": self._spec.house, "target": self._spec.target, **_jsonable(dict(result or {}))}
+                   "house": self._spec.house, "target": self._spec.target, **dict(result or {})}
         self._json[OUTCOME].log(_dumps(outcome), log_time=self._frame * STEP_NS)
-        self._writer.write_metadata("outcome", {k: json.dumps(v, sort_keys=True) for k, v in outcome.items()})
+        self._writer.write_metadata("outcome", {k: _dumps(v).decode() for k, v in outcome.items()})
         self._writer.close()
         self._writer = None
         if self.keep == "failures" and outcome["success"]:
@@ -610,20 +607,28 @@ class EpisodeRecorder:
         self._log_belief(k, t, info or {})
 
     def _log_belief(self, k: int, t: int, info: Mapping) -> None:
+        """Publishes the agent's belief, plan and sub-target when they change.
+
+        (Foxglove shows the latest message at any time, seeking included; the
+        plotted edge beliefs step at each change.)
+        """
         subtarget = info.get("subtarget")
         plan = [str(p) for p in info.get("plan") or []]
         belief = info.get("belief")
-        if subtarget is not None and (not self._subtargets or self._subtargets[-1] != subtarget):
-            self._subtargets.append(str(subtarget))
-        if belief is None and not plan and subtarget is None:
-            return
-        msg = {"step": k, "subtarget": subtarget, "plan": plan, "plan_probability": None}
         if belief is not None:
             belief = np.asarray(belief, dtype=np.float64)
             n = len(rooms.GRAPH_NODES)
             if belief.shape != (n, n):
                 raise ValueError(f"info['belief'] has shape {belief.shape}, expected ({n}, {n}) over "
                                  f"{list(rooms.GRAPH_NODES)}")
+        if subtarget is not None and (not self._subtargets or self._subtargets[-1] != subtarget):
+            self._subtargets.append(str(subtarget))
+        key = (subtarget, tuple(plan), None if belief is None else belief.tobytes())
+        if key == self._belief_key or (self._belief_key is None and key == (None, (), None)):
+            return
+        self._belief_key = key
+        msg = {"step": k, "subtarget": subtarget, "plan": plan, "plan_probability": None}
+        if belief is not None:
             msg["edges"] = {_edge_key(i, j): float(belief[i, j]) for i in range(n) for j in range(i + 1, n)}
             if len(plan) > 1:
                 idx = [rooms.room_index(p) for p in plan]
