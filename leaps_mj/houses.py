@@ -12,11 +12,15 @@ A house is generated in four deterministic stages from one integer seed:
    one end and a garage at the other. The public rooms are placed in the chain
    kitchen – dining room – living room, the office next to the living room and
    bedrooms alternate with bathrooms in the private wing, so the room graph has
-   the regularities of real homes. Room sizes vary per type.
-3. **Doors.** Every room opens to the hallway it sits on; neighbouring rooms
-   share a door with a probability that depends on their types (kitchen–dining
-   high, bedroom–garage never); a yard of outdoor space surrounds the house,
-   reached by a front door, an optional back door and the garage.
+   the regularities of real homes. Room sizes vary per type; half of the
+   houses have a stepped outline; an entry foyer is added when both ends of
+   the hallway are taken.
+3. **Doors.** A room opens to the hallway it sits on with a probability by
+   type (``_HALL_DOOR_P``); neighbouring rooms share a door with a probability
+   by type pair (``_DOOR_P``: kitchen–dining high, bedroom–garage never); a
+   repair step connects any room left unreachable. A yard of outdoor space
+   surrounds the house, reached by a front door, an optional back door and
+   the garage's side door (a garage may be reached from the yard only).
 4. **Furniture.** Items from the catalogue ``assets/furniture.json`` (boxes,
    cylinders, ellipsoids), placed against walls or free-standing, never in a
    door's clearance zone; every room stays reachable for a cylinder agent of
