@@ -1,0 +1,483 @@
+"""Agents for RoomNav: random, pure sub-policy, LEAPS, and the oracle.
+
+Two small interfaces are the contract between agents, sub-policies, the
+evaluation loop (:mod:`leaps_mj.evaluate`) and the episode recorder:
+
+* A **sub-policy** μ(target) is any object with ``reset(target: str)``
+  (start a new run towards a room of that type; resets recurrent state) and
+  ``act(timestep) -> int``. The learned CNN+LSTM policies and the
+  :class:`LocalExpertPolicy` below both implement it.
+* An **agent** has a ``name``, ``reset(target)`` at the start of an episode,
+  ``step(timestep) -> int`` and ``info() -> dict`` with the keys
+  ``"subtarget"`` (room type or None), ``"plan"`` (node names, ``[]`` when the
+  agent does not plan) and ``"belief"`` (the 9x9 posterior, or None).
+
+:class:`LeapsAgent` reads only ``timestep.observation["semantic"]`` and
+``["target"]`` itself; everything it sees of pixels goes through its
+sub-policy. Agents that need privileged state (the oracle, the local expert)
+take the environment in their constructor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pathlib
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import scipy.ndimage
+
+from leaps_mj import expert, rooms, semantic
+
+#: Shipped priors, by name: ``leaps_mj/data/prior_<name>.json``.
+DATA_DIR = pathlib.Path(__file__).resolve().parent / "data"
+#: The prior the LEAPS agent uses unless told otherwise.
+DEFAULT_PRIOR = "cpu"
+#: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.semantic.SemanticModel`).
+RULES = ("paper", "release")
+#: Agent names accepted by :func:`make_agent`.
+AGENT_NAMES = ("random", "pure", "leaps", "oracle")
+#: Steps after which the local expert gives up on an exploration goal room.
+EXPLORE_PATIENCE = 150
+#: How far inside a room (metres) the local expert walks before choosing its next room.
+_ROOM_DEPTH = 0.6
+
+
+@runtime_checkable
+class SubPolicy(Protocol):
+    """μ(target): a policy that walks to a room of a given type."""
+
+    def reset(self, target: str) -> None:
+        """Starts a new run towards a room of type ``target``."""
+
+    def act(self, timestep) -> int:
+        """The action for this time step."""
+
+
+@runtime_checkable
+class Agent(Protocol):
+    """An agent solving RoomNav episodes."""
+
+    name: str
+
+    def reset(self, target: str) -> None:
+        """Starts an episode whose target room type is ``target``."""
+
+    def step(self, timestep) -> int:
+        """The action for this time step."""
+
+    def info(self) -> dict:
+        """``{"subtarget": str | None, "plan": list[str], "belief": np.ndarray | None}``."""
+
+
+def _check_target(target: str) -> str:
+    """A target room type (one of :data:`rooms.ROOM_TYPES`), or ValueError."""
+    if target not in rooms.ROOM_TYPES:
+        raise ValueError(f"unknown target {target!r}; expected one of {list(rooms.ROOM_TYPES)}")
+    return target
+
+
+class RandomAgent:
+    """Uniformly random actions from a seeded generator.
+
+    Args:
+      seed: seed of the action draws.
+    """
+
+    name = "random"
+
+    def __init__(self, seed: int = 0):
+        self.rng = np.random.default_rng(seed)
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target)
+
+    def step(self, timestep) -> int:
+        del timestep
+        return int(self.rng.integers(rooms.NUM_ACTIONS))
+
+    def info(self) -> dict:
+        return {"subtarget": None, "plan": [], "belief": None}
+
+
+class PureAgent:
+    """The "pure μ(θ)" baseline: runs the target's sub-policy for the whole episode.
+
+    Args:
+      subpolicy: any :class:`SubPolicy`.
+    """
+
+    name = "pure"
+
+    def __init__(self, subpolicy: SubPolicy):
+        self.subpolicy = subpolicy
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target)
+        self.subpolicy.reset(target)
+
+    def step(self, timestep) -> int:
+        return int(self.subpolicy.act(timestep))
+
+    def info(self) -> dict:
+        return {"subtarget": self.target, "plan": [], "belief": None}
+
+
+class OracleAgent:
+    """The privileged geodesic expert (:class:`leaps_mj.expert.GeodesicExpert`): an upper bound.
+
+    Args:
+      env: the environment it acts in (its state is read directly).
+      seed: seed of the expert's unsticking moves.
+    """
+
+    name = "oracle"
+
+    def __init__(self, env, seed: int = 0):
+        self.expert = expert.GeodesicExpert(env, seed=seed)
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target)
+        self.expert.reset()
+
+    def step(self, timestep) -> int:
+        return self.expert.act(timestep)
+
+    def info(self) -> dict:
+        return {"subtarget": self.target, "plan": [], "belief": None}
+
+
+@dataclasses.dataclass(frozen=True)
+class Replan:
+    """One planning decision of :class:`LeapsAgent` (for case studies and tests).
+
+    Attributes:
+      step: agent step (0-based) at which it planned.
+      reason: "start", "window" (N steps passed), "reached" (sub-target room
+        entered) or "target" (target room entered before the sub-target).
+      here: names of the nodes the agent was in.
+      plan: node names of the chosen path, from a node in ``here`` to the target.
+      subtarget: the sub-target it then ran the sub-policy for.
+      belief: the posterior the plan was made on (9x9).
+    """
+
+    step: int
+    reason: str
+    here: tuple[str, ...]
+    plan: tuple[str, ...]
+    subtarget: str
+    belief: np.ndarray
+
+
+def current_nodes(bits) -> list[int]:
+    """Graph nodes the agent is in, from one step's 8 room-type bits.
+
+    All bits off means untyped indoor space, the ``indoor`` node.
+    """
+    on = np.flatnonzero(np.asarray(bits))
+    return [int(i) for i in on] if on.size else [rooms.room_index(rooms.INDOOR)]
+
+
+class LeapsAgent:
+    """LEAPS: plan on the semantic model, act with sub-policies, update on experience.
+
+    At the first step, every ``replan_every`` steps, when the agent enters
+    the sub-target's room, and when it enters the target room, the agent
+    (1) updates the posterior from the window of steps since the last
+    decision, (2) plans the most probable path from the nodes it is in now to
+    the target and (3) runs the sub-policy of the path's first hop (of the
+    target itself once it is in a target room). The sub-policy is reset only
+    when the sub-target changes; a replan that keeps the sub-target lets the
+    same run continue (its recurrent state intact).
+
+    Observation rules (``rule``):
+
+    * ``"paper"``: B = OR of the semantic bits over the window
+      (:func:`leaps_mj.semantic.seen_vector`); pairs both in B are observed
+      connected, pairs with exactly one in B not connected.
+    * ``"release"`` (the original code): one observation of the edge from the
+      run's start node to its sub-target, positive when the sub-target was
+      reached, negative when a window passed without reaching it.
+
+    Consecutive windows share their boundary step, so a room change at a
+    window boundary is still seen as a pair.
+
+    Args:
+      subpolicy: any :class:`SubPolicy`.
+      model: the :class:`leaps_mj.semantic.SemanticModel` (reset per episode).
+      replan_every: N, steps per window (paper: 30).
+      rule: "paper" or "release".
+
+    Attributes:
+      history: the :class:`Replan` decisions of the current episode.
+    """
+
+    name = "leaps"
+
+    def __init__(self, subpolicy: SubPolicy, model: semantic.SemanticModel, replan_every: int = 30,
+                 rule: str = "paper"):
+        if isinstance(replan_every, bool) or not isinstance(replan_every, int) or replan_every < 1:
+            raise ValueError(f"replan_every {replan_every!r}: expected a positive integer")
+        if rule not in RULES:
+            raise ValueError(f"rule {rule!r}: expected one of {list(RULES)}")
+        self.subpolicy = subpolicy
+        self.model = model
+        self.replan_every = replan_every
+        self.rule = rule
+        self.target: str | None = None
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self.history: list[Replan] = []
+        self._steps = 0
+        self._window: list[np.ndarray] = []
+        self._plan: list[int] = []
+        self._subtarget: int | None = None
+        self._belief: np.ndarray | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target)
+        self._target_node = rooms.room_index(target)
+        self.model.reset()
+        self._reset_state()
+
+    def step(self, timestep) -> int:
+        if self.target is None:
+            raise ValueError("LeapsAgent.step called before reset(target)")
+        obs = timestep.observation
+        bits = np.asarray(obs["semantic"], dtype=bool)
+        if bits.shape != (rooms.NUM_ROOM_TYPES,):
+            raise ValueError(f"semantic bits of shape {bits.shape}; expected ({rooms.NUM_ROOM_TYPES},)")
+        shown = np.flatnonzero(np.asarray(obs["target"]))
+        if shown.tolist() != [self._target_node]:
+            raise ValueError(f"observation target {np.asarray(obs['target']).tolist()} does not match the "
+                             f"episode target {self.target!r} given to reset()")
+        self._window.append(bits)
+        here = current_nodes(bits)
+        reason = self._replan_reason(here)
+        if reason is not None:
+            if reason != "start":
+                self._observe(reason)
+            self._replan(here, reason)
+        self._steps += 1
+        return int(self.subpolicy.act(timestep))
+
+    def _replan_reason(self, here: list[int]) -> str | None:
+        """Why the agent must decide again at this step, or None to keep going."""
+        if self._subtarget is None:
+            return "start"
+        if self._target_node in here and self._subtarget != self._target_node:
+            return "target"
+        if self._subtarget in here and self._subtarget != self._target_node:
+            return "reached"
+        if len(self._window) > self.replan_every:
+            return "window"
+        return None
+
+    def _observe(self, reason: str) -> None:
+        """Updates the model from the window that just ended."""
+        if self.rule == "paper":
+            self.model.observe_bits(semantic.seen_vector(np.stack(self._window)))
+        elif len(self._plan) > 1 and reason in ("reached", "window"):
+            self.model.observe_subtarget_outcome(self._plan[0], self._subtarget, reason == "reached")
+
+    def _replan(self, here: list[int], reason: str) -> None:
+        """Plans from ``here``, switches sub-policy if the sub-target changed, opens a new window."""
+        self._window = self._window[-1:]
+        self._belief = self.model.posterior()
+        plan = self.model.plan(here, self._target_node)
+        subtarget = plan[1] if len(plan) > 1 else plan[0]
+        if subtarget != self._subtarget:
+            self.subpolicy.reset(rooms.GRAPH_NODES[subtarget])
+        self._plan, self._subtarget = plan, subtarget
+        self.history.append(Replan(
+            step=self._steps, reason=reason, here=tuple(rooms.GRAPH_NODES[n] for n in here),
+            plan=tuple(rooms.GRAPH_NODES[n] for n in plan), subtarget=rooms.GRAPH_NODES[subtarget],
+            belief=self._belief,
+        ))
+
+    def info(self) -> dict:
+        return {
+            "subtarget": None if self._subtarget is None else rooms.GRAPH_NODES[self._subtarget],
+            "plan": [rooms.GRAPH_NODES[n] for n in self._plan],
+            "belief": self._belief,
+        }
+
+
+class _RoomWalker(expert.GeodesicExpert):
+    """The geodesic expert, also able to walk well into given rooms.
+
+    ``step_towards(room_ids, False, pose)`` with a tuple of room ids follows
+    the distance field to the part of those rooms at least
+    :data:`_ROOM_DEPTH` metres from their edges (returning None there), so a
+    walk ends inside a room, where its semantic bit is on, rather than on the
+    threshold of a doorway. A room-type name works as in the parent class.
+    """
+
+    def field(self, target, view):
+        if isinstance(target, str):
+            return super().field(target, view)
+        hm = self.env.task.house_model
+        key = (hm.house.id, tuple(sorted(target)))
+        if key not in self._fields:
+            grid = hm.grid
+            room = np.isin(grid.room_id, list(target))
+            deep = room & grid.free & (scipy.ndimage.distance_transform_edt(room) * grid.cell >= _ROOM_DEPTH)
+            zone = deep if deep.any() else room & grid.free
+            dist = self._safe_grid(hm).distance_from(zone)
+            if not np.isfinite(dist).any():
+                dist = grid.distance_from(zone)
+            _, nearest = scipy.ndimage.distance_transform_edt(~np.isfinite(dist), return_indices=True)
+            self._fields[key] = (dist, nearest, np.zeros((0, 2)))
+        return self._fields[key]
+
+
+class LocalExpertPolicy:
+    """A privileged sub-policy that is good near its target and poor far from it.
+
+    Stands in for a learned sub-policy: when the agent's current room is of
+    the requested type or one door away from one
+    (:meth:`leaps_mj.env.HouseModel.plan_length` <= 1), it walks the
+    geodesic path like :class:`leaps_mj.expert.GeodesicExpert` (for the
+    episode's own target including the "see" behaviour: face the target's
+    objects and stay; for another room type, into the room until its
+    semantic bit is surely on, then stay). Farther away it explores: it walks into a random
+    neighbouring room (through a door of the current room), not going back
+    the way it came unless that is the only door, and picks the next room on
+    arrival (or after :data:`EXPLORE_PATIENCE` steps without arriving).
+
+    Args:
+      env: the :class:`leaps_mj.env.RoomNavEnvironment` it acts in.
+      seed: seed of the exploration choices and unsticking moves.
+
+    Attributes:
+      mode: "expert" or "explore" at the last action (None before).
+      goal_room: id of the room it is exploring towards (None in expert mode).
+    """
+
+    def __init__(self, env, seed: int = 0):
+        self.env = env
+        self.rng = np.random.default_rng(seed)
+        self.walker = _RoomWalker(env, seed=int(self.rng.integers(2**31)))
+        self.target: str | None = None
+        self.mode: str | None = None
+        self.goal_room: int | None = None
+        self._came_from: int | None = None
+        self._last_room: int | None = None
+        self._goal_steps = 0
+
+    def reset(self, target: str) -> None:
+        rooms.room_index(target)
+        self.target = target
+        self.mode = None
+        self.goal_room = None
+        self._came_from = self._last_room = None
+        self._goal_steps = 0
+
+    def act(self, timestep) -> int:
+        del timestep
+        if self.target is None:
+            raise ValueError("LocalExpertPolicy.act called before reset(target)")
+        task = self.env.task
+        hm = task.house_model
+        pose = self.env.physics.agent_pose()
+        room = hm.room_at(pose[:2])
+        if room != self._last_room:
+            self._came_from, self._last_room = self._last_room, room
+        hops = hm.plan_length(room, self.target) if room >= 0 else None
+        if hops is not None and hops <= 1:
+            self.mode, self.goal_room = "expert", None
+            if self.target == task.episode.target:
+                return self.walker.act()
+            ids = tuple(r.id for r in hm.house.rooms if r.type == self.target)
+            action = self.walker.step_towards(ids, False, pose)
+            return expert.STAY if action is None else int(action)
+        self.mode = "explore"
+        action = None
+        if self.goal_room is not None and self._goal_steps < EXPLORE_PATIENCE:
+            action = self.walker.step_towards((self.goal_room,), False, pose)
+        if action is None:  # no goal yet, arrived, or gave up: pick the next room
+            self.goal_room = self._next_room(hm, room)
+            self._goal_steps = 0
+            if self.goal_room is None:
+                return int(self.rng.integers(rooms.NUM_ACTIONS))
+            action = self.walker.step_towards((self.goal_room,), False, pose)
+            if action is None:
+                action = expert.FORWARD
+        self._goal_steps += 1
+        return int(action)
+
+    def _next_room(self, hm, room: int) -> int | None:
+        """A random neighbour of ``room``, avoiding the room just left when possible."""
+        if room < 0:
+            return None
+        options = sorted(hm.room_graph[room])
+        if len(options) > 1 and self._came_from in options:
+            options.remove(self._came_from)
+        return int(self.rng.choice(options)) if options else None
+
+
+def prior_path(prior: str) -> pathlib.Path:
+    """The file of a shipped prior (``"cpu"`` -> ``leaps_mj/data/prior_cpu.json``) or a given path."""
+    if os.sep in prior or prior.endswith(".json"):
+        return pathlib.Path(prior)
+    return DATA_DIR / f"prior_{prior}.json"
+
+
+def load_model(prior: str = DEFAULT_PRIOR) -> semantic.SemanticModel:
+    """The semantic model for the LEAPS agent.
+
+    Args:
+      prior: name of a shipped prior (default ``"cpu"``: learned by
+        ``python -m leaps_mj.train prior --preset cpu`` on the training
+        houses), ``"reference"`` for the original release's SUNCG prior with
+        the paper's noise, or a path to a :meth:`SemanticModel.to_json` file.
+
+    Raises:
+      ValueError: if the prior file is missing or invalid.
+    """
+    if prior == "reference":
+        return semantic.SemanticModel.from_reference()
+    path = prior_path(prior)
+    if not path.is_file():
+        raise ValueError(f"no prior file {str(path)!r} (prior {prior!r}); expected a shipped prior name "
+                         "(learn one with `python -m leaps_mj.train prior`), 'reference', or a JSON path")
+    return semantic.SemanticModel.from_json(path)
+
+
+def make_agent(name: str, env, subpolicy: SubPolicy | None = None, seed: int = 0, **kwargs) -> Agent:
+    """Builds an agent by name.
+
+    Args:
+      name: "random", "pure", "leaps" or "oracle".
+      env: the environment (for agents and sub-policies reading privileged state).
+      subpolicy: the sub-policy of "pure" and "leaps" (any :class:`SubPolicy`,
+        e.g. the learned ones); default a :class:`LocalExpertPolicy`.
+      seed: seed of the agent's (and default sub-policy's) random draws.
+      **kwargs: for "leaps": ``model`` (a SemanticModel) or ``prior`` (see
+        :func:`load_model`), ``replan_every``, ``rule``.
+
+    Raises:
+      ValueError: for an unknown name or keyword arguments the agent does not take.
+    """
+    if name not in AGENT_NAMES:
+        raise ValueError(f"unknown agent {name!r}; expected one of {list(AGENT_NAMES)}")
+    allowed = {"model", "prior", "replan_every", "rule"} if name == "leaps" else set()
+    if set(kwargs) - allowed:
+        raise ValueError(f"agent {name!r} takes no options {sorted(set(kwargs) - allowed)}; "
+                         f"expected a subset of {sorted(allowed)}")
+    if name == "random":
+        return RandomAgent(seed)
+    if name == "oracle":
+        return OracleAgent(env, seed)
+    sub = subpolicy if subpolicy is not None else LocalExpertPolicy(env, seed)
+    if name == "pure":
+        return PureAgent(sub)
+    if "model" in kwargs and "prior" in kwargs:
+        raise ValueError("give the LEAPS agent either model or prior, not both")
+    model = kwargs.pop("model", None) or load_model(kwargs.pop("prior", DEFAULT_PRIOR))
+    return LeapsAgent(sub, model, **kwargs)

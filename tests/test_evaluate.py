@@ -1,0 +1,106 @@
+"""Tests for the evaluation harness: the episode loop, statistics, files, plots and resuming."""
+
+import csv
+
+import numpy as np
+import pytest
+
+import leaps_mj
+from leaps_mj import agents, episodes, evaluate
+
+
+class Recorder:
+    """An observer remembering the calls it got."""
+
+    def __init__(self):
+        self.calls = []
+
+    def begin(self, env, spec, agent):
+        self.calls.append(("begin", spec.target, agent.name))
+
+    def step(self, timestep, action, info):
+        self.calls.append(("step", action, info["subtarget"]))
+
+    def end(self, result):
+        self.calls.append(("end", result["success"]))
+
+
+def test_run_episode_reports_and_calls_the_observer(tiny_dataset):
+    spec = episodes.load_split(str(tiny_dataset), "test")[0]
+    env = leaps_mj.load(str(tiny_dataset), "test", reward="sparse", horizon=300)
+    try:
+        obs = Recorder()
+        result = evaluate.run_episode(env, agents.OracleAgent(env), spec, 300, observer=obs)
+        assert result["success"] and result["success_step"] == result["steps"] <= 300
+        assert (result["house"], result["target"], result["plan_length"]) == (spec.house, spec.target,
+                                                                             spec.plan_length)
+        assert obs.calls[0] == ("begin", spec.target, "oracle") and obs.calls[-1] == ("end", True)
+        assert len(obs.calls) == result["steps"] + 2
+        short = evaluate.run_episode(env, agents.RandomAgent(0), spec, 3)
+        assert short["steps"] == 3 and short["success_step"] is None
+        with pytest.raises(ValueError, match="exceeds the environment's horizon"):
+            evaluate.run_episode(env, agents.RandomAgent(0), spec, 301)
+    finally:
+        env.close()
+
+
+def test_success_at_smaller_horizons_is_derived_from_the_success_step():
+    rows = [{"success_step": 5}, {"success_step": None}, {"success_step": 50}]
+    assert evaluate.success_at(rows, 10).tolist() == [True, False, False]
+    assert evaluate.success_at(rows, 50).tolist() == [True, False, True]
+
+
+def test_wilson_interval():
+    low, high = evaluate.wilson(5, 10)
+    assert (low, high) == pytest.approx((0.2366, 0.7634), abs=1e-4)
+    assert evaluate.wilson(0, 20)[0] == 0.0
+    assert np.isnan(evaluate.wilson(0, 0)[0])
+
+
+def test_select_episodes_is_stratified_and_seeded(tiny_dataset):
+    specs = episodes.load_split(str(tiny_dataset), "test")
+    picked = evaluate.select_episodes(specs, per_length=2, seed=3)
+    lengths = [specs[i].plan_length for i in picked]
+    assert picked == sorted(picked) and picked == evaluate.select_episodes(specs, per_length=2, seed=3)
+    assert all(lengths.count(L) == min(2, sum(s.plan_length == L for s in specs)) for L in set(lengths))
+    assert evaluate.select_episodes(specs, limit=4) == [0, 1, 2, 3]
+    with pytest.raises(ValueError, match="per_length"):
+        evaluate.select_episodes(specs, per_length=0)
+
+
+def _main(tiny_dataset, out, *extra):
+    return evaluate.main(["--agent", "random", "pure", "leaps", "oracle", "--dataset", str(tiny_dataset),
+                          "--split", "test", "--horizon", "20", "60", "--out", str(out), "--limit", "4",
+                          "--prior", "reference", "--no-progress", *extra])
+
+
+def test_main_writes_csvs_table_plots_and_resumes(tiny_dataset, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "eval"
+    assert _main(tiny_dataset, out) == 0
+    for label in ("random", "pure", "leaps", "oracle"):
+        with open(out / f"episodes_{label}.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert [int(r["episode"]) for r in rows] == [0, 1, 2, 3]
+        assert all(int(r["steps"]) <= 60 for r in rows)
+    table = (out / "results.md").read_text()
+    assert "| oracle |" in table and "H = 20" in table and "Relative improvement" in table
+    for name in ("success_vs_plan_length.png", "success_vs_metres.png", "relative_improvement.png"):
+        assert (out / name).stat().st_size > 10_000
+    assert "| leaps |" in capsys.readouterr().out
+
+    def no_more_episodes(*args, **kwargs):
+        raise AssertionError("a finished episode was run again")
+
+    monkeypatch.setattr(evaluate, "run_episode", no_more_episodes)
+    assert _main(tiny_dataset, out) == 0
+    assert (out / "results.md").read_text() == table
+    assert _main(tiny_dataset, out, "--seed", "1") == 2  # other settings: refuse to mix
+    assert "other settings" in capsys.readouterr().err
+
+
+def test_results_do_not_depend_on_workers(tiny_dataset, tmp_path):
+    specs = [evaluate.AGENTS["random"], evaluate.AGENTS["pure"]]
+    config = evaluate.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
+    one = evaluate.run(config, specs, [0, 1, 2], tmp_path / "one", progress=False)
+    two = evaluate.run(config, specs, [0, 1, 2], tmp_path / "two", workers=2, chunk=1, progress=False)
+    assert one == two

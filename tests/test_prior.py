@@ -1,0 +1,71 @@
+"""Tests for prior learning by random exploration and the observation-noise search."""
+
+import json
+
+import numpy as np
+import pytest
+
+from leaps_mj import rooms, semantic, train_prior, tune_obs_noise
+
+
+def test_count_run_counts_present_pairs_from_the_start_node():
+    pos = np.zeros((9, 9), dtype=np.int64)
+    trials = np.zeros((9, 9), dtype=np.int64)
+    kitchen, dining, garage, indoor = (rooms.room_index(r) for r in ("kitchen", "dining_room", "garage", "indoor"))
+    seen = np.zeros(9, dtype=bool)
+    seen[[kitchen, dining, rooms.room_index("office")]] = True  # office is not in this house
+    train_prior.count_run(pos, trials, kitchen, [kitchen, dining, garage, indoor], seen)
+    assert trials[kitchen].tolist() == [int(j in (dining, garage, indoor)) for j in range(9)]
+    assert pos[kitchen].tolist() == [int(j == dining) for j in range(9)]
+    assert trials.sum() == 3 and pos.sum() == 1
+
+
+def test_prior_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="trials"):
+        train_prior.PriorConfig(trials=0)
+    with pytest.raises(ValueError, match="floor"):
+        train_prior.PriorConfig(floor=0.7)
+
+
+def test_tiny_preset_end_to_end_and_resume(tiny_dataset, tmp_path, capsys):
+    out = tmp_path / "prior"
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(out)]
+    assert train_prior.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "rank correlation" in text and "(0 resumed" in text
+    model = semantic.SemanticModel.from_json(out / "prior.json")
+    assert (model.psi_obs0, model.psi_obs1) == (semantic.PAPER_PSI_OBS0, semantic.PAPER_PSI_OBS1)
+    off = model.prior[~np.eye(9, dtype=bool)]
+    assert off.min() >= 1e-4 and off.max() <= 1 - 1e-4 and np.ptp(off) > 0.1
+    assert len(list((out / "counts").glob("*.json"))) == 3
+    assert (out / "prior.png").stat().st_size > 10_000
+    first = (out / "prior.json").read_text()
+    assert train_prior.main(argv) == 0
+    assert "(3 resumed" in capsys.readouterr().out
+    assert (out / "prior.json").read_text() == first
+    # Counts made with other settings are not reused.
+    record = json.loads(next((out / "counts").glob("*.json")).read_text())
+    assert record["config"] == {"trials": 2, "steps": 300, "seed": 0}
+    assert train_prior.main(argv + ["--trials", "1"]) == 0
+    assert "(0 resumed" in capsys.readouterr().out
+
+
+def test_choose_prefers_the_best_then_the_paper_values():
+    paper = tune_obs_noise.PAPER
+    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, paper: 0.4}) == (0.01, 0.3)
+    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, paper: 0.5}) == paper
+    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, (0.05, 0.3): 0.5}) == (0.01, 0.3)
+
+
+def test_obs_noise_tiny_preset_writes_the_chosen_noise(tiny_dataset, tmp_path, capsys):
+    out = tmp_path / "tune"
+    out.mkdir()
+    semantic.SemanticModel.from_reference().to_json(out / "prior.json")
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(out)]
+    assert tune_obs_noise.main(argv) == 0
+    model = semantic.SemanticModel.from_json(out / "prior.json")
+    assert (model.psi_obs0, model.psi_obs1) in tune_obs_noise.PRESETS["tiny"].grid()
+    np.testing.assert_allclose(model.prior, semantic.SemanticModel.from_reference().prior)
+    table = (out / "obs_noise.md").read_text()
+    assert table.count("\n| 0.") == 2 and table.count("**chosen**") == 1
+    assert "chosen psi_obs0" in capsys.readouterr().out
