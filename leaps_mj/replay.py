@@ -33,6 +33,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.collections as mcollections  # noqa: E402
+import matplotlib.patches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from mcap.decoder import DecoderFactory  # noqa: E402
@@ -159,7 +160,11 @@ def load(path: str | os.PathLike) -> EpisodeRecord:
     house_json = attachments.get(f"{house_id}.json")
     if house_json is None:
         raise ValueError(f"{str(path)!r} lacks the attachment '{house_id}.json' (the house description)")
-    house = houses.House.from_json(json.loads(house_json), source=f"{path}:{house_id}.json")
+    try:
+        house = houses.House.from_json(json.loads(house_json), source=f"{path}:{house_id}.json")
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{str(path)!r}: the attachment '{house_id}.json' is not valid JSON ({e}): a corrupt "
+                         "file") from None
     poses = np.array([[m.pose.position.x, m.pose.position.y,
                        2 * np.arctan2(m.pose.orientation.z, m.pose.orientation.w)] for m in by_topic[record.POSE]])
     segmentation = np.stack([record.decolorize(_image(m, np.uint8, 3)) for m in by_topic[record.SEGMENTATION]])
@@ -233,7 +238,7 @@ def draw_trajectory(ax, rec: EpisodeRecord, upto: int | None = None) -> None:
     used = [s for s in dict.fromkeys(rec.subtargets[1:n + 1]) if s is not None]
     handles = [matplotlib.lines.Line2D([], [], color=SUBTARGET_COLORS[s], lw=2.2, label=f"sub-target: {s}")
                for s in used]
-    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], loc="upper center", bbox_to_anchor=(0.5, -0.1),
+    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], loc="upper center", bbox_to_anchor=(0.5, -0.13),
               ncol=3, fontsize=7, frameon=False)
 
 
@@ -261,7 +266,7 @@ def save_preview(rec: EpisodeRecord, path: str | os.PathLike, frames: int = 3) -
     """Writes a picture of a record: top-down trajectory beside first-person
     segmentation and depth at ``frames`` evenly spaced steps."""
     ks = np.linspace(0, rec.num_steps, frames).round().astype(int)
-    fig = plt.figure(figsize=(4.2 + 2.6 * frames, 5.4), layout="constrained")
+    fig = plt.figure(figsize=(4.6 + 2.6 * frames, 4.6), layout="constrained")
     grid = fig.add_gridspec(2, frames + 1, width_ratios=[1.7] + [1.0] * frames)
     ax = fig.add_subplot(grid[:, 0])
     draw_trajectory(ax, rec)
@@ -278,6 +283,10 @@ def save_preview(rec: EpisodeRecord, path: str | os.PathLike, frames: int = 3) -
                 a.set_title(f"step {k}" + (f"\nsub-target {sub}" if sub else ""), fontsize=8)
             if c == 0:
                 a.set_ylabel(name, fontsize=8)
+    shown = np.unique(rec.segmentation[ks])
+    handles = [matplotlib.patches.Patch(color=record.SEG_PALETTE[i] / 255, label=rooms.SEG_CLASSES[i].replace("_", " "))
+               for i in shown]
+    fig.legend(handles=handles, loc="outside lower right", ncol=min(len(handles), 7), fontsize=7, frameon=False)
     topdown.save_figure(fig, path)
 
 
