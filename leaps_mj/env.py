@@ -43,6 +43,8 @@ from leaps_mj import batching, houses, navgrid, render, rooms
 
 _SUBSTEP = 0.1  # metres per collision-checked increment of a move
 _NO_DISTANCE = 1e3  # geodesic distance reported where the target is unreachable
+#: Depth reported where the view ray hits nothing (sky) or beyond: metres.
+MAX_DEPTH = 20.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -315,7 +317,7 @@ class RoomNav(base.Task):
         spec = collections.OrderedDict(
             segmentation=specs.BoundedArray((c.height, c.width), np.uint8, 0, rooms.NUM_SEG_CLASSES - 1,
                                             name="segmentation"),
-            depth=specs.Array((c.height, c.width), np.float32, name="depth"),
+            depth=specs.BoundedArray((c.height, c.width), np.float32, 0.0, MAX_DEPTH, name="depth"),
             semantic=specs.BoundedArray((rooms.NUM_ROOM_TYPES,), np.uint8, 0, 1, name="semantic"),
             target=specs.BoundedArray((rooms.NUM_ROOM_TYPES,), np.uint8, 0, 1, name="target"),
             collision=specs.BoundedArray((), np.uint8, 0, 1, name="collision"),
@@ -389,7 +391,7 @@ class RoomNav(base.Task):
         seg, depth = renderer.render_segments(physics.data.ptr)
         class_lut, see_lut = self._env.segment_luts
         self.segmentation = class_lut[seg]
-        self.depth = depth.astype(np.float32)
+        self.depth = np.minimum(depth, MAX_DEPTH).astype(np.float32)
         counts = np.bincount(seg.ravel(), minlength=len(class_lut))
         self.target_fraction = float(counts @ see_lut[self.target_index]) / seg.size
 

@@ -72,11 +72,11 @@ _DEFAULT_DOOR_P = 0.05
 #: through the dining room, an en-suite bathroom through its bedroom); the
 #: connectivity repair adds the hallway door when it is not.
 _HALL_DOOR_P = {
-    "kitchen": 0.75,
-    "dining_room": 0.8,
+    "kitchen": 0.4,
+    "dining_room": 0.6,
     "living_room": 0.9,
-    "office": 0.85,
-    "bathroom": 0.85,
+    "office": 0.5,
+    "bathroom": 0.55,
     "bedroom": 1.0,
     "garage": 0.55,
     "indoor": 1.0,
@@ -532,7 +532,10 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
                 edge = _shared_edge(plan_rooms[i][1], plan_rooms[j][1], _MIN_DOOR_WALL)
                 if edge is None:
                     continue
-                p = door_probability(plan_rooms[i][0], plan_rooms[j][0]) + (j == hall_id)
+                # The hallway competes with its own door probability, so a room
+                # meant to be reached through a neighbour (a suite) stays so.
+                p = (_HALL_DOOR_P[plan_rooms[i][0]] if j == hall_id
+                     else door_probability(plan_rooms[i][0], plan_rooms[j][0]))
                 if p > 0 and (best is None or p > best[0]):
                     best = (p, i, j, edge)
         if best is None:
