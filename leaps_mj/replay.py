@@ -224,8 +224,12 @@ def _segments_by_subtarget(rec: EpisodeRecord):
     return segs, colors
 
 
-def draw_trajectory(ax, rec: EpisodeRecord, upto: int | None = None) -> None:
-    """Draws the house and the trajectory (frames 0..upto) coloured by sub-target."""
+def draw_trajectory(ax, rec: EpisodeRecord, upto: int | None = None) -> list:
+    """Draws the house and the trajectory (frames 0..upto) coloured by sub-target.
+
+    Returns:
+      Legend handles (sub-targets, start, agent) for the caller to place.
+    """
     topdown.draw_house(ax, rec.house, furniture_labels=False)
     segs, colors = _segments_by_subtarget(rec)
     n = rec.num_steps if upto is None else upto
@@ -238,8 +242,7 @@ def draw_trajectory(ax, rec: EpisodeRecord, upto: int | None = None) -> None:
     used = [s for s in dict.fromkeys(rec.subtargets[1:n + 1]) if s is not None]
     handles = [matplotlib.lines.Line2D([], [], color=SUBTARGET_COLORS[s], lw=2.2, label=f"sub-target: {s}")
                for s in used]
-    ax.legend(handles=handles + ax.get_legend_handles_labels()[0], loc="upper center", bbox_to_anchor=(0.5, -0.13),
-              ncol=3, fontsize=7, frameon=False)
+    return handles + ax.get_legend_handles_labels()[0]
 
 
 def _title(rec: EpisodeRecord) -> str:
@@ -251,7 +254,8 @@ def _title(rec: EpisodeRecord) -> str:
 def save_topdown(rec: EpisodeRecord, path: str | os.PathLike) -> None:
     """Writes the top-down trajectory picture (PNG, atomically)."""
     fig, ax = plt.subplots(figsize=(8, 7))
-    draw_trajectory(ax, rec)
+    handles = draw_trajectory(ax, rec)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1), fontsize=7)
     ax.set_title(_title(rec), fontsize=9)
     topdown.save_figure(fig, path)
 
@@ -269,7 +273,7 @@ def save_preview(rec: EpisodeRecord, path: str | os.PathLike, frames: int = 3) -
     fig = plt.figure(figsize=(4.6 + 2.6 * frames, 4.6), layout="constrained")
     grid = fig.add_gridspec(2, frames + 1, width_ratios=[1.7] + [1.0] * frames)
     ax = fig.add_subplot(grid[:, 0])
-    draw_trajectory(ax, rec)
+    fig.legend(handles=draw_trajectory(ax, rec), loc="outside lower left", ncol=3, fontsize=7, frameon=False)
     ax.set_title(_title(rec), fontsize=9)
     for c, k in enumerate(ks):
         for r, (img, name) in enumerate(((record.colorize(rec.segmentation[k]), "segmentation"),
@@ -294,7 +298,9 @@ class _TopdownCanvas:
     """The house drawn once; trajectories are painted per frame in pixel space."""
 
     def __init__(self, rec: EpisodeRecord, height: int):
-        fig = plt.figure(figsize=(height / 100 * 1.2, height / 100), dpi=100)
+        x0, y0, x1, y1 = rec.house.lot
+        aspect = float(np.clip((x1 - x0 + 1) / (y1 - y0 + 1), 1.0, 2.0))
+        fig = plt.figure(figsize=(height / 100 * aspect, height / 100), dpi=100)
         ax = fig.add_axes((0.02, 0.02, 0.96, 0.96))
         topdown.draw_house(ax, rec.house, furniture_labels=False, room_labels=True)
         ax.set_axis_off()
