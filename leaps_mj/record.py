@@ -332,8 +332,12 @@ _JSON_SCHEMAS = {
 }
 
 
-def _parse_keep(keep: str) -> int | None:
-    """Sample size of a ``keep`` mode ("all", "failures", "sample:K"); None if not sampling."""
+def parse_mode(keep: str) -> int | None:
+    """Checks a record mode ("all", "failures", "sample:K"): K, or None if not sampling.
+
+    Raises:
+      ValueError: naming the bad mode and the accepted ones.
+    """
     if keep in ("all", "failures"):
         return None
     prefix, _, k = keep.partition(":")
@@ -405,7 +409,7 @@ class EpisodeRecorder:
         self.run_config = json.loads(_dumps(dict(run_config or {})))
         self.keep = keep
         self.seed = seed
-        self._sample = _parse_keep(keep)
+        self._sample = parse_mode(keep)
         if self._sample and self.single:
             raise ValueError(f"record mode {keep!r} samples episodes: expected a directory, not {str(out)!r}")
         self._options = MCAPWriteOptions(chunk_size=int(chunk_size), compression_threads=0)
