@@ -8,23 +8,20 @@ what a person needs to replay it in Foxglove (or with
 Topics. Log times are simulation time: frame ``k`` (the observation after
 ``k`` actions; frame 0 is the start) is logged at ``k * 0.1 s``.
 
-==========================  =========================  ==========================================
-topic                       schema                     content
-==========================  =========================  ==========================================
-``/camera/segmentation``    ``foxglove.RawImage``      rgb8: class ids through :data:`SEG_PALETTE`
-``/camera/depth``           ``foxglove.RawImage``      32FC1: metres, exactly the observation
-``/tf``                     ``foxglove.FrameTransforms``  world -> agent (x, y, yaw), agent -> camera
-``/agent/pose``             ``foxglove.PoseInFrame``   the same pose (the 3D panel draws its trail)
-``/house``                  ``foxglove.SceneUpdate``   once, at 0: floors by room type, walls,
-                                                       doors, furniture, room names, agent body
-``/belief/graph``           ``foxglove.SceneUpdate``   room-type graph above the house: edge
-                                                       opacity = belief, plan in red
-``/belief``                 JSON                       edge beliefs (plottable), plan, sub-target
-``/semantic``               JSON                       room-type bits, their names, the target
-``/step``                   JSON                       action, reward, return, collision, discount
-``/episode``                JSON                       at 0: episode spec, agent, run config
-``/outcome``                JSON                       at the last frame: success, length, ...
-==========================  =========================  ==========================================
+* ``/camera/segmentation`` (``foxglove.RawImage`` rgb8): class ids through
+  :data:`SEG_PALETTE`.
+* ``/camera/depth`` (``foxglove.RawImage`` 32FC1): metres, exactly the observation.
+* ``/tf`` (``foxglove.FrameTransforms``): world -> agent (x, y, yaw), agent -> camera.
+* ``/agent/pose`` (``foxglove.PoseInFrame``): the same pose in ``world``.
+* ``/house`` (``foxglove.SceneUpdate``, once at 0): floors by room type, walls,
+  doors, furniture, room names, the agent's body.
+* ``/belief/graph`` (``foxglove.SceneUpdate``): the room-type graph above the
+  house, edge opacity = belief, plan in red.
+* ``/belief`` (JSON): edge beliefs (plottable), plan, sub-target.
+* ``/semantic`` (JSON): room-type bits, their names, the target.
+* ``/step`` (JSON): action, reward, return, collision, discount.
+* ``/episode`` (JSON, at 0): episode spec, agent, run config.
+* ``/outcome`` (JSON, at the last frame): success, length, sub-targets, ...
 
 ``/step`` has one message per action (frames 1..T); the image, pose and
 semantic topics have T + 1 (frame 0 included); the ``/belief`` topics have a
@@ -94,8 +91,6 @@ SEMANTIC = "/semantic"
 STEP = "/step"
 EPISODE = "/episode"
 OUTCOME = "/outcome"
-#: Topics every record has.
-REQUIRED_TOPICS = (SEGMENTATION, DEPTH, TF, POSE, HOUSE, SEMANTIC, EPISODE, OUTCOME)
 
 _STRUCTURE_COLORS = {
     "empty": (0, 0, 0),
