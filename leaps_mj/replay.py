@@ -260,8 +260,9 @@ def save_topdown(rec: EpisodeRecord, path: str | os.PathLike) -> None:
     topdown.save_figure(fig, path)
 
 
-def depth_image(depth: np.ndarray, max_depth: float = 5.0) -> np.ndarray:
-    """(H, W) metres -> (H, W, 3) uint8, near bright, far dark (magma)."""
+def depth_image(depth: np.ndarray, max_depth: float = 10.0) -> np.ndarray:
+    """(H, W) metres -> (H, W, 3) uint8, near bright, far dark (magma), clipped at
+    ``max_depth`` (the policy network's depth scale)."""
     v = 1.0 - np.clip(depth / max_depth, 0.0, 1.0)
     return (matplotlib.colormaps["magma"](v)[..., :3] * 255).astype(np.uint8)
 
