@@ -2,7 +2,10 @@
 
 Importing the package picks an off-screen OpenGL backend for MuJoCo when
 ``MUJOCO_GL`` is unset (EGL if Mesa's or a vendor's libEGL is present, else
-OSMesa), because dm_control reads that variable once, at import.
+OSMesa), because dm_control reads that variable once, at import. It also
+asks Mesa's software rasteriser for one thread per process
+(``LP_NUM_THREADS=1`` unless set): frames of 120x90 are too small to gain
+from threads, and environments run one per process.
 """
 
 import ctypes.util
@@ -16,6 +19,7 @@ def _default_gl_backend() -> str:
 
 
 os.environ.setdefault("MUJOCO_GL", _default_gl_backend())
+os.environ.setdefault("LP_NUM_THREADS", "1")
 if os.environ["MUJOCO_GL"] == "osmesa":
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 elif os.environ["MUJOCO_GL"] == "egl":
