@@ -71,7 +71,7 @@ class TuneConfig:
 
 PRESETS = {
     "tiny": TuneConfig(psi_obs0=(0.001, 0.05), psi_obs1=(0.15,), episodes_per_length=1, horizon=100),
-    "cpu": TuneConfig(episodes_per_length=10, horizon=500),
+    "cpu": TuneConfig(episodes_per_length=25, horizon=500),
     "paper": TuneConfig(episodes_per_length=None, horizon=1000),
 }
 
@@ -111,7 +111,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m leaps_mj.train obs-noise", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
-                   help="tiny: 2 points x 1 episode per plan length; cpu: 3x3 x 10, H=500; paper: 3x3 x all, H=1000")
+                   help="tiny: 2 points x 1 episode per plan length; cpu: 3x3 x 25, H=500; paper: 3x3 x all, H=1000")
     p.add_argument("--out", type=pathlib.Path, default=None, help="output folder (default runs/prior_<preset>)")
     p.add_argument("--prior", type=pathlib.Path, default=None,
                    help="prior JSON (default <out>/prior.json, else the shipped default)")

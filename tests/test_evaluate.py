@@ -104,3 +104,15 @@ def test_results_do_not_depend_on_workers(tiny_dataset, tmp_path):
     one = evaluate.run(config, specs, [0, 1, 2], tmp_path / "one", progress=False)
     two = evaluate.run(config, specs, [0, 1, 2], tmp_path / "two", workers=2, chunk=1, progress=False)
     assert one == two
+
+
+def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
+    from leaps_mj import casestudy
+
+    out = tmp_path / "case.png"
+    argv = ["--episode", "7", "--dataset", str(tiny_dataset), "--prior", "reference", "--horizon", "120",
+            "--out", str(out)]
+    assert casestudy.main(argv) == 0
+    assert out.stat().st_size > 50_000
+    assert "replans:" in capsys.readouterr().out
+    assert casestudy.main(argv[:1] + ["999"] + argv[2:]) == 2
