@@ -1,0 +1,120 @@
+"""Tests of leaps_mj.policies: the learned sub-policy behind the SubPolicy interface."""
+
+import numpy as np
+import pytest
+import torch
+
+import leaps_mj
+from leaps_mj import agents, nets, policies, rooms
+
+W, H = 24, 18
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """Untrained 24x18 policies for two targets, saved as the trainer saves them."""
+    out = tmp_path_factory.mktemp("policies")
+    torch.manual_seed(0)
+    for target in ("kitchen", "bedroom"):
+        config = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16)
+        nets.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
+    return out
+
+
+@pytest.fixture(scope="module")
+def env(tiny_dataset):
+    e = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=W, height=H, targets=("kitchen",), horizon=30)
+    yield e
+    e.close()
+
+
+def run(policy, env, spec, steps=12):
+    ts = env.reset_to(spec)
+    policy.reset(spec.target)
+    actions = []
+    for _ in range(steps):
+        a = policy.act(ts)
+        actions.append(a)
+        ts = env.step(a)
+        if ts.last():
+            break
+    return actions
+
+
+def test_acts_with_valid_actions_on_a_real_timestep(folder, env):
+    policy = policies.LearnedSubPolicy(folder, targets=("kitchen", "bedroom"), seed=3)
+    assert isinstance(policy, agents.SubPolicy)
+    assert (policy.width, policy.height) == (W, H)
+    env.reset()
+    actions = run(policy, env, env.episode)
+    assert actions and all(isinstance(a, int) and 0 <= a < rooms.NUM_ACTIONS for a in actions)
+
+
+def test_sampling_is_seeded_and_greedy_is_deterministic(folder, env):
+    env.reset()
+    spec = env.episode
+    sampled = [run(policies.LearnedSubPolicy(folder, targets=("kitchen",), seed=7), env, spec) for _ in range(2)]
+    assert sampled[0] == sampled[1]
+    greedy = [run(policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True), env, spec)
+              for _ in range(2)]
+    assert greedy[0] == greedy[1]
+
+
+def test_reset_clears_the_lstm_state(folder, env):
+    policy = policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True)
+    env.reset()
+    spec = env.episode
+    first = run(policy, env, spec)
+    assert run(policy, env, spec) == first  # same episode, fresh state: same actions
+
+
+def test_frames_at_a_multiple_of_the_resolution_give_the_same_actions(folder, tiny_dataset, env):
+    big = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=3 * W, height=3 * H, targets=("kitchen",),
+                        horizon=30)
+    try:
+        env.reset()
+        spec = env.episode
+        small_actions = run(policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True), env, spec)
+        big_actions = run(policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True), big, spec)
+    finally:
+        big.close()
+    assert big_actions == small_actions
+
+
+def test_frames_of_another_size_are_refused(folder, env):
+    policy = policies.LearnedSubPolicy(folder, targets=("kitchen",))
+    policy.reset("kitchen")
+    ts = env.reset()
+    obs = dict(ts.observation, segmentation=np.zeros((H, W + 1), np.uint8), depth=np.zeros((H, W + 1), np.float32))
+    with pytest.raises(ValueError, match="24x18"):
+        policy.act(ts._replace(observation=obs))
+
+
+def test_wrong_resolution_checkpoint_raises(folder):
+    with pytest.raises(ValueError, match="trained at 24x18"):
+        policies.LearnedSubPolicy(folder, targets=("kitchen",), width=40, height=30)
+
+
+def test_missing_target_and_misuse_raise(folder):
+    with pytest.raises(ValueError, match="does not exist"):
+        policies.LearnedSubPolicy(folder, targets=("garage",))
+    policy = policies.LearnedSubPolicy(folder, targets=("kitchen",))
+    with pytest.raises(ValueError, match="reset"):
+        policy.act(None)
+    with pytest.raises(ValueError, match="no sub-policy for target 'bedroom'"):
+        policy.reset("bedroom")
+    with pytest.raises(ValueError, match="unknown room type|expected one of"):
+        policies.LearnedSubPolicy(folder, targets=("attic",))
+
+
+def test_load_default_names_the_training_command_when_missing(monkeypatch, tmp_path):
+    monkeypatch.setattr(policies, "DEFAULT_DIR", tmp_path)
+    with pytest.raises(ValueError, match="python -m leaps_mj.train policy --preset cpu"):
+        policies.load_default()
+
+
+def test_load_default_loads_the_shipped_policies():
+    if not all((policies.DEFAULT_DIR / f"{t}.pt").is_file() for t in rooms.ROOM_TYPES):
+        pytest.skip("shipped checkpoints not present")
+    policy = policies.load_default()
+    assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.ROOM_TYPES

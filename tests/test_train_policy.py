@@ -1,0 +1,148 @@
+"""Tests of leaps_mj.train_policy: returns, losses, tiny training runs, resume."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from leaps_mj import nets, train_policy
+
+
+def tiny(dataset, **overrides):
+    return dataclasses.replace(train_policy.PRESETS["tiny"], dataset=str(dataset), **overrides)
+
+
+def test_n_step_returns_hand_example():
+    # Two envs, three steps, gamma 0.5. Env 0: its episode ends at step 1
+    # with a success (discount 0), so step 1 does not bootstrap and step 0
+    # uses step 1's return; step 2 (a LAST observation) is invalid and its
+    # value is irrelevant but must still be finite. Env 1 is truncated at
+    # the horizon after step 0 (discount 1: bootstrap from V(s_1) = 4).
+    rewards = np.array([[1.0, 2.0], [10.0, 3.0], [0.0, 1.0]])
+    discounts = np.array([[0.5, 0.5], [0.0, 0.5], [0.0, 0.5]])
+    next_values = np.array([[99.0, 4.0], [99.0, 6.0], [99.0, 8.0]])
+    bootstrap = np.array([[False, True], [True, False], [True, True]])
+    got = train_policy.n_step_returns(rewards, discounts, next_values, bootstrap)
+    r1_env1 = 1.0 + 0.5 * 8.0  # step 2 bootstraps from V(s_3) = 8
+    want = np.array([
+        [1.0 + 0.5 * 10.0, 2.0 + 0.5 * 4.0],
+        [10.0, 3.0 + 0.5 * r1_env1],
+        [0.0, r1_env1],
+    ])
+    np.testing.assert_allclose(got, want)
+
+
+def test_n_step_returns_requires_final_bootstrap():
+    z = np.zeros((2, 1))
+    with pytest.raises(ValueError, match="bootstrap"):
+        train_policy.n_step_returns(z, z, z, np.zeros((2, 1), bool))
+
+
+def test_a2c_loss_masks_invalid_steps_and_normalises():
+    torch.manual_seed(0)
+    config = train_policy.PRESETS["tiny"]
+    logits = torch.randn(4, 3, 9, requires_grad=True)
+    values = torch.randn(4, 3, requires_grad=True)
+    actions = torch.randint(0, 9, (4, 3))
+    returns = torch.randn(4, 3)
+    valid = torch.ones(4, 3)
+    valid[2, 1] = 0.0
+    loss, scalars = train_policy.a2c_loss(logits, values, actions, returns, valid, config)
+    loss.backward()
+    assert torch.isfinite(loss)
+    assert logits.grad[2, 1].abs().sum() == 0 and values.grad[2, 1] == 0
+    assert 0 < scalars["entropy"] <= np.log(9) + 1e-6
+    # Changing an invalid step's return changes nothing.
+    returns2 = returns.clone()
+    returns2[2, 1] = 1e6
+    loss2, _ = train_policy.a2c_loss(logits, values, actions, returns2, valid, config)
+    assert torch.allclose(loss, loss2)
+
+
+def test_bc_loss_is_cross_entropy_and_accuracy():
+    logits = torch.tensor([[[5.0] + [0.0] * 8, [0.0] * 8 + [5.0]]])  # (T=1, B=2, 9)
+    labels = torch.tensor([[0, 3]])
+    ce, acc = train_policy.bc_loss(logits, labels, torch.ones(1, 2))
+    want = (torch.nn.functional.cross_entropy(logits[0], labels[0], reduction="none")).mean()
+    assert torch.isclose(ce, want) and acc == 0.5
+
+
+def test_curriculum_and_beta_schedules():
+    c = train_policy.TrainConfig(method="dagger+a2c", total_steps=1000 * 64 * 30, dagger_fraction=0.5,
+                                 beta_fraction=0.5, start_distance=4.0, distance_step=3.0,
+                                 curriculum_iterations=100, max_distance=12.0)
+    assert [c.start_distance_at(i) for i in (0, 99, 100, 250, 10_000)] == [4.0, 4.0, 7.0, 10.0, 12.0]
+    assert c.dagger_iterations == 500
+    assert c.beta_at(0) == 1.0 and c.beta_at(125) == 0.5 and c.beta_at(250) == 0.0 and c.beta_at(600) == 0.0
+
+
+@pytest.mark.parametrize("bad", [dict(method="ppo"), dict(num_envs=0), dict(gamma=1.5), dict(lr=0.0),
+                                 dict(conv_channels=())])
+def test_config_rejects_bad_values(bad):
+    with pytest.raises(ValueError):
+        dataclasses.replace(train_policy.PRESETS["tiny"], **bad)
+
+
+def test_cli_overrides_every_field():
+    parser = train_policy.build_parser()
+    args = parser.parse_args(["--preset", "tiny", "--lr", "0.01", "--conv-channels", "4,4", "--method", "a2c",
+                              "--normalize-advantages", "false"])
+    assert (args.lr, args.conv_channels, args.method, args.normalize_advantages) == (0.01, (4, 4), "a2c", False)
+    dests = {a.dest for a in parser._actions}
+    assert {f.name for f in dataclasses.fields(train_policy.TrainConfig)} <= dests
+
+
+@pytest.fixture(scope="module")
+def resumed_run(tiny_dataset, tmp_path_factory):
+    """A tiny run killed after iteration 3 (last checkpoint at 2), then resumed to the end.
+
+    Returns (config, out folder, the trainer as saved at the kill, the trainer loaded from it).
+    """
+    out = tmp_path_factory.mktemp("run")
+    config = tiny(tiny_dataset, total_steps=6 * 16, checkpoint_every=2, dagger_fraction=0.5)
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--target", "kitchen", "--out", str(out),
+            "--total-steps", "96", "--checkpoint-every", "2", "--dagger-fraction", "0.5", "--no-progress"]
+    assert train_policy.main(argv + ["--stop-after", "3"]) == 0
+    killed = train_policy.Trainer(config, "kitchen", out, progress=False)
+    assert killed.iteration == 3
+    # A kill after iteration 3 was logged but before its checkpoint: the state says 2.
+    nets.save_checkpoint(killed.state_path, killed.model, killed.model.config,
+                         {**killed._extra(), "iteration": 2, "global_step": 2 * config.batch,
+                          "optimizer": killed.optimizer.state_dict()})
+    loaded = train_policy.Trainer(config, "kitchen", out, progress=False)
+    assert train_policy.main(argv) == 0
+    return config, out, killed, loaded
+
+
+def test_resume_continues_the_same_config_and_counters(resumed_run):
+    config, out, killed, loaded = resumed_run
+    assert (loaded.iteration, loaded.global_step) == (2, 2 * config.batch)
+    for a, b in zip(killed.model.state_dict().values(), loaded.model.state_dict().values()):
+        assert torch.equal(a, b)
+    assert loaded.optimizer.state_dict()["state"], "optimizer state restored"
+    final = train_policy.Trainer(config, "kitchen", out, progress=False)
+    assert final.finished and final.iteration == config.iterations == 6
+    log = train_policy.read_progress(out / "kitchen" / "progress.csv")
+    assert list(log["iteration"]) == [1, 2, 3, 4, 5, 6]  # the uncheckpointed row 3 was redone once
+    with pytest.raises(ValueError, match="lr: saved"):
+        train_policy.Trainer(dataclasses.replace(config, lr=0.5), "kitchen", out, progress=False)
+
+
+def test_training_losses_are_finite_in_both_phases(resumed_run):
+    _, out, _, _ = resumed_run
+    log = train_policy.read_progress(out / "kitchen" / "progress.csv")
+    assert list(log["phase"]) == ["dagger"] * 3 + ["a2c"] * 3
+    assert np.isfinite(log["bc_cross_entropy"][:3]).all() and np.isfinite(log["policy_loss"][3:]).all()
+    assert np.isfinite(log["value_loss"]).all() and np.isfinite(log["entropy"][3:]).all()
+    assert (log["SPS"] > 0).all()
+
+
+def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
+    config, out, _, _ = resumed_run
+    _, pconfig, extra = nets.load_policy(out / "kitchen.pt", config.width, config.height)
+    assert pconfig == config.policy_config() and extra["iteration"] == 6 and extra["target"] == "kitchen"
+    assert set(extra["eval"]) == {"train/sampled", "train/greedy", "valid/sampled", "valid/greedy"}
+    assert all(0.0 <= r["success_rate"] <= 1.0 and r["episodes"] == config.eval_episodes
+               for r in extra["eval"].values())
+    assert (out / "training_curves.png").stat().st_size > 0
