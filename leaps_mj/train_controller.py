@@ -1,0 +1,380 @@
+"""Trains the HRL baseline's LSTM controller with A2C over options.
+
+``python -m leaps_mj.train controller --preset tiny|cpu|paper --out DIR [--subpolicy auto|local|learned]``
+
+The controller (:class:`leaps_mj.nets.ControllerNet`, LSTM 50) acts in the
+option-level problem of :class:`leaps_mj.baselines.ControllerAgent`: each
+decision picks a sub-target, whose sub-policy then runs for up to
+``option_steps`` steps. Episodes are sampled from the training houses (any
+target, any start, ``horizon`` steps). Rewards, from the original release:
+``-option_cost`` per decision and ``+success_reward`` on success; returns are
+discounted per decision with γ = 0.99 and end at success or the horizon.
+A2C: the agent samples its choices; after every ``batch_episodes`` episodes
+the loss ``-log π(a) (R - V) + value_coef (R - V)² / 2 - entropy H(π)`` over
+all their decisions is minimised by one Adam step (lr 1e-3, gradient norm
+clipped at ``max_grad_norm``).
+
+Sub-policies (``--subpolicy``): ``learned`` = ``leaps_mj.policies.load_default()``
+(then the environment renders at their resolution), ``local`` =
+:class:`leaps_mj.agents.LocalExpertPolicy`, ``auto`` = learned when the
+shipped checkpoints are there, else local. The choice is stored in the
+checkpoint.
+
+Files under ``DIR``: ``controller.pt`` (latest weights, loadable by
+:func:`leaps_mj.baselines.load_controller`; with the final validation result
+once done), ``state.pt`` (resumable state), ``progress.csv`` (one row per
+update), TensorBoard events. Re-running the same command resumes from the
+last update (episode sampling continues from a fresh seeded stream, so a
+resumed run is not bit-identical to an uninterrupted one); a different
+configuration is refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import pathlib
+import sys
+import time
+from typing import Sequence
+
+import numpy as np
+import torch
+import tqdm
+
+import leaps_mj
+from leaps_mj import agents, baselines, episodes, evaluate, nets, rooms
+from leaps_mj import dataset as dataset_lib
+
+SUBPOLICIES = ("auto", "local", "learned")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """A controller training run (one per preset).
+
+    Attributes:
+      dataset: House dataset name or folder (train split; valid for the final check).
+      subpolicy: "local" or "learned" ("auto" is resolved before a run starts).
+      width, height: Environment resolution (the learned sub-policies' own).
+      horizon: Steps of a training episode.
+      option_steps: N, the longest option.
+      lstm: Controller LSTM units.
+      episodes: Training episodes in all.
+      batch_episodes: Episodes per update.
+      gamma: Discount per decision.
+      entropy: Entropy bonus coefficient.
+      value_coef: Value-loss coefficient.
+      lr: Adam learning rate.
+      max_grad_norm: Gradient clipping norm.
+      option_cost: Reward -option_cost per decision.
+      success_reward: Reward on success.
+      eval_episodes: Fixed validation episodes of the final check (stratified by plan length).
+      eval_horizon: Their horizon.
+      seed: Seed of the episodes, the initialisation and the sampling.
+    """
+
+    dataset: str = dataset_lib.CANONICAL
+    subpolicy: str = "local"
+    width: int = 40
+    height: int = 30
+    horizon: int = 300
+    option_steps: int = 30
+    lstm: int = 50
+    episodes: int = 1200
+    batch_episodes: int = 8
+    gamma: float = 0.99
+    entropy: float = 0.01
+    value_coef: float = 0.5
+    lr: float = 1e-3
+    max_grad_norm: float = 1.0
+    option_cost: float = 0.1
+    success_reward: float = 2.0
+    eval_episodes: int = 50
+    eval_horizon: int = 300
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.subpolicy not in ("local", "learned"):
+            raise ValueError(f"subpolicy {self.subpolicy!r}: expected 'local' or 'learned'")
+        for name in ("horizon", "option_steps", "lstm", "episodes", "batch_episodes", "eval_episodes",
+                     "eval_horizon"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} {value!r}: expected a positive integer")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma {self.gamma!r}: expected a value in [0, 1]")
+        for name in ("lr", "max_grad_norm"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
+        for name in ("entropy", "value_coef", "option_cost", "success_reward"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
+
+    @property
+    def updates(self) -> int:
+        return -(-self.episodes // self.batch_episodes)
+
+
+PRESETS = {
+    # Seconds: tests and smoke runs.
+    "tiny": TrainConfig(horizon=40, option_steps=10, episodes=4, batch_episodes=2, eval_episodes=2,
+                        eval_horizon=40),
+    # About 15 minutes on 2 shared CPU cores.
+    "cpu": TrainConfig(),
+    # Longer: more episodes at the paper's longest horizon.
+    "paper": TrainConfig(horizon=1000, episodes=20_000, batch_episodes=32, eval_episodes=500, eval_horizon=1000),
+}
+
+
+def resolve_subpolicy(choice: str) -> str:
+    """"auto" -> "learned" when the shipped sub-policy checkpoints exist, else "local"."""
+    if choice not in SUBPOLICIES:
+        raise ValueError(f"subpolicy {choice!r}: expected one of {list(SUBPOLICIES)}")
+    if choice != "auto":
+        return choice
+    from leaps_mj import policies
+
+    return "learned" if all((policies.DEFAULT_DIR / f"{t}.pt").is_file() for t in rooms.ROOM_TYPES) else "local"
+
+
+def make_subpolicy(kind: str, env, seed: int):
+    """The sub-policy of a run: the shipped learned ones or the local expert of ``env``."""
+    if kind == "learned":
+        from leaps_mj import policies
+
+        return policies.load_default(seed=seed)
+    return agents.LocalExpertPolicy(env, seed=seed)
+
+
+def discounted_returns(rewards: np.ndarray, gamma: float) -> np.ndarray:
+    """Returns of one episode's decisions, ending with the episode (no bootstrap)."""
+    out = np.zeros(len(rewards), dtype=np.float64)
+    following = 0.0
+    for t in reversed(range(len(rewards))):
+        following = rewards[t] + gamma * following
+        out[t] = following
+    return out
+
+
+def run_training_episode(env, agent: baselines.ControllerAgent, config: TrainConfig) -> dict:
+    """Runs a sampled episode; returns its decisions' inputs, choices, rewards and the outcome."""
+    ts = env.reset()
+    agent.reset(env.episode.target)
+    while not ts.last():
+        ts = env.step(agent.step(ts))
+    success = bool(env.task.success)
+    rewards = np.full(len(agent.decisions), -config.option_cost)
+    rewards[-1] += config.success_reward * success
+    return {"inputs": np.stack([d.inputs for d in agent.decisions]),
+            "choices": np.array([d.subtarget for d in agent.decisions], dtype=np.int64),
+            "rewards": rewards, "success": success, "steps": env.task.steps}
+
+
+def target_of(episode: dict) -> int:
+    """The target room type of a recorded episode (its one-hot block in the first input)."""
+    k = rooms.NUM_ROOM_TYPES
+    return int(episode["inputs"][0, 2 * k:3 * k].argmax())
+
+
+def a2c_loss(net: nets.ControllerNet, batch: list[dict], config: TrainConfig) -> tuple[torch.Tensor, dict]:
+    """The A2C loss over the decisions of a batch of episodes (LSTM unrolled per episode from zero state)."""
+    lengths = [len(ep["choices"]) for ep in batch]
+    T, B = max(lengths), len(batch)
+    x = torch.zeros(T, B, 4 * rooms.NUM_ROOM_TYPES)
+    choices = torch.zeros(T, B, dtype=torch.long)
+    returns = torch.zeros(T, B)
+    valid = torch.zeros(T, B)
+    for b, ep in enumerate(batch):
+        n = lengths[b]
+        x[:n, b] = torch.as_tensor(ep["inputs"])
+        choices[:n, b] = torch.as_tensor(ep["choices"])
+        returns[:n, b] = torch.as_tensor(discounted_returns(ep["rewards"], config.gamma), dtype=torch.float32)
+        valid[:n, b] = 1.0
+    state = net.initial_state(B)
+    logits, values = [], []
+    for t in range(T):
+        lt, vt, state = net(x[t], state)
+        logits.append(lt)
+        values.append(vt)
+    dist = torch.distributions.Categorical(logits=torch.stack(logits))
+    values = torch.stack(values)
+    advantages = returns - values.detach()
+    n = valid.sum()
+    policy_loss = -(dist.log_prob(choices) * advantages * valid).sum() / n
+    value_loss = 0.5 * (((returns - values) ** 2) * valid).sum() / n
+    entropy = (dist.entropy() * valid).sum() / n
+    loss = policy_loss + config.value_coef * value_loss - config.entropy * entropy
+    return loss, {"policy_loss": policy_loss.item(), "value_loss": value_loss.item(), "entropy": entropy.item()}
+
+
+class Trainer:
+    """Trains (or resumes) a controller run in ``out``; see the module docstring."""
+
+    def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True):
+        self.config = config
+        self.out = pathlib.Path(out)
+        self.progress = progress
+        self.state_path = self.out / "state.pt"
+        self.policy_path = self.out / "controller.pt"
+        torch.manual_seed(config.seed)
+        self.net = nets.ControllerNet(nets.ControllerConfig(lstm=config.lstm))
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        self.update = 0
+        self.history: list[dict] = []
+        self.eval: dict | None = None
+        if self.state_path.exists():
+            self._resume()
+
+    def _resume(self) -> None:
+        net, _, extra = nets.load_policy(self.state_path)
+        saved, given = extra["train_config"], dataclasses.asdict(self.config)
+        diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
+        if diff:
+            raise ValueError(f"{self.state_path} holds a run with another configuration (saved, given): {diff}; "
+                             "rerun with the same options or another --out")
+        self.net.load_state_dict(net.state_dict())
+        self.optimizer.load_state_dict(extra["optimizer"])
+        self.update, self.history, self.eval = extra["update"], extra["history"], extra["eval"]
+
+    def _extra(self) -> dict:
+        return {"option_steps": self.config.option_steps, "subpolicy": self.config.subpolicy,
+                "update": self.update, "history": self.history, "eval": self.eval,
+                "train_config": dataclasses.asdict(self.config)}
+
+    def save(self) -> None:
+        nets.save_checkpoint(self.state_path, self.net, self.net.config,
+                             {**self._extra(), "optimizer": self.optimizer.state_dict()})
+        nets.save_checkpoint(self.policy_path, self.net, self.net.config, self._extra())
+        fields = list(self.history[0]) if self.history else []
+        lines = [",".join(fields)] + [",".join(f"{r[f]:.6g}" if isinstance(r[f], float) else str(r[f])
+                                               for f in fields) for r in self.history]
+        dataset_lib.write_atomic(self.out / "progress.csv", ("\n".join(lines) + "\n").encode())
+
+    def _seed(self, *keys: int) -> int:
+        return int(np.random.SeedSequence([self.config.seed, *keys]).generate_state(1)[0])
+
+    @property
+    def finished(self) -> bool:
+        return self.update >= self.config.updates
+
+    def train(self, stop_after: int | None = None) -> None:
+        """Runs the remaining updates (or ``stop_after`` more), checkpointing after each."""
+        from torch.utils.tensorboard import SummaryWriter
+
+        c = self.config
+        self.out.mkdir(parents=True, exist_ok=True)
+        writer = SummaryWriter(str(self.out))
+        if self.update == 0:
+            writer.add_text("hyperparameters", "|param|value|\n|-|-|\n" + "\n".join(
+                f"|{k}|{v}|" for k, v in dataclasses.asdict(c).items()))
+        env = leaps_mj.load(c.dataset, "train", seed=self._seed(1, self.update), width=c.width, height=c.height,
+                            horizon=c.horizon, reward="sparse")
+        try:
+            sub = make_subpolicy(c.subpolicy, env, self._seed(2, self.update))
+            agent = baselines.ControllerAgent(sub, self.net, c.option_steps, seed=self._seed(3, self.update))
+            with tqdm.tqdm(total=c.updates, initial=self.update, desc="controller updates",
+                           disable=not self.progress) as bar:
+                stop = c.updates if stop_after is None else min(c.updates, self.update + stop_after)
+                while self.update < stop:
+                    t0 = time.perf_counter()
+                    batch = [run_training_episode(env, agent, c) for _ in range(c.batch_episodes)]
+                    self.net.train()
+                    loss, scalars = a2c_loss(self.net, batch, c)
+                    self.optimizer.zero_grad()
+                    loss.backward()
+                    torch.nn.utils.clip_grad_norm_(self.net.parameters(), c.max_grad_norm)
+                    self.optimizer.step()
+                    self.net.eval()
+                    self.update += 1
+                    row = {"update": self.update, "episodes": self.update * c.batch_episodes,
+                           "success_rate": float(np.mean([ep["success"] for ep in batch])),
+                           "decisions": float(np.mean([len(ep["choices"]) for ep in batch])),
+                           "return": float(np.mean([discounted_returns(ep["rewards"], c.gamma)[0] for ep in batch])),
+                           "steps": float(np.mean([ep["steps"] for ep in batch])),
+                           "target_choices": float(np.mean(np.concatenate([ep["choices"] == target_of(ep)
+                                                                           for ep in batch]))),
+                           **scalars, "seconds": time.perf_counter() - t0}
+                    self.history.append(row)
+                    for key, value in row.items():
+                        if key != "update":
+                            group = "losses" if key.endswith(("loss", "entropy")) else "charts"
+                            writer.add_scalar(f"{group}/{key}", value, row["episodes"])
+                    self.save()
+                    bar.update(1)
+                    bar.set_postfix(success=f"{row['success_rate']:.2f}", decisions=f"{row['decisions']:.1f}")
+        finally:
+            env.close()
+            writer.close()
+
+    def validate(self) -> dict:
+        """Success of the controller, and of the pure baseline with the same sub-policy, on fixed valid episodes."""
+        c = self.config
+        specs = episodes.load_split(c.dataset, "valid")
+        per_length = max(1, c.eval_episodes // episodes.MAX_PLAN_LENGTH)
+        indices = evaluate.select_episodes(specs, per_length, c.eval_episodes, c.seed)
+        env = leaps_mj.load(c.dataset, "valid", seed=c.seed, width=c.width, height=c.height,
+                            horizon=c.eval_horizon, reward="sparse")
+        results = {"controller": [], "pure": []}
+        try:
+            for i in tqdm.tqdm(indices, desc="controller validation", disable=not self.progress):
+                seed = evaluate.episode_seed(c.seed, i)
+                for name, agent in (
+                        ("controller", baselines.ControllerAgent(make_subpolicy(c.subpolicy, env, seed), self.net,
+                                                                 c.option_steps, seed=seed)),
+                        ("pure", agents.PureAgent(make_subpolicy(c.subpolicy, env, seed)))):
+                    results[name].append(evaluate.run_episode(env, agent, specs[i], c.eval_horizon)["success"])
+        finally:
+            env.close()
+        return {"episodes": len(indices), "horizon": c.eval_horizon,
+                **{f"{name}_success": float(np.mean(r)) for name, r in results.items()}}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m leaps_mj.train controller", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu", help="base configuration")
+    parser.add_argument("--out", default="runs/controller", help="output folder (resumed if it holds a run)")
+    parser.add_argument("--subpolicy", choices=SUBPOLICIES, default="auto",
+                        help="sub-policies: learned (shipped), local (local expert), auto (learned if shipped)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--stop-after", type=int, default=None,
+                        help="stop after this many more updates (checkpointed; rerun resumes)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
+    for field in dataclasses.fields(TrainConfig):
+        if field.name != "subpolicy":
+            group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=type(field.default),
+                               default=None, metavar=type(field.default).__name__.upper())
+    args = parser.parse_args(argv)
+    for name in ("threads", "stop_after"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            raise ValueError(f"--{name.replace('_', '-')} {getattr(args, name)}: expected a positive integer")
+    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
+                 if f.name != "subpolicy" and getattr(args, f.name) is not None}
+    subpolicy = resolve_subpolicy(args.subpolicy)
+    if subpolicy == "learned":
+        from leaps_mj import policies
+
+        shipped = policies.load_default()
+        overrides.update(width=shipped.width, height=shipped.height)
+    config = dataclasses.replace(PRESETS[args.preset], subpolicy=subpolicy, **overrides)
+    torch.set_num_threads(args.threads)
+    trainer = Trainer(config, args.out, progress=not args.no_progress)
+    trainer.train(args.stop_after)
+    if not trainer.finished:
+        print(f"stopped after update {trainer.update} of {config.updates}; rerun the same command to resume")
+        return 0
+    if trainer.eval is None:
+        trainer.eval = trainer.validate()
+        trainer.save()
+    print(f"controller: {trainer.net.num_parameters():,} parameters (semantic model: 38); sub-policy "
+          f"{config.subpolicy}; option steps {config.option_steps}")
+    print(json.dumps(trainer.eval))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
