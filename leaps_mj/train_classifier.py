@@ -27,7 +27,8 @@ negatives reaching it (FPR).
 Files under ``DIR``: ``classifier.pt`` (best), ``state.pt`` (resumable
 state after the last epoch), ``data_train.npz`` / ``data_valid.npz``,
 ``progress.csv`` (one row per epoch), ``metrics.json`` (the best epoch's
-validation metrics), TensorBoard events. Re-running the same command resumes;
+validation metrics), ``samples.png`` (a validation sample per room type),
+TensorBoard events. Re-running the same command resumes;
 a different configuration is refused.
 """
 
@@ -383,6 +384,33 @@ def format_metrics(best: dict) -> str:
     return "\n".join(lines)
 
 
+def plot_samples(data: dict, path: str | os.PathLike) -> None:
+    """The first positive sample of each room type: its 4 views (segmentation colours) and its bits."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from leaps_mj import record, topdown
+
+    kinds = [k for k in range(K) if np.any((data["query"] == k) & data["positive"])]
+    fig, axes = plt.subplots(len(kinds), classifier.NUM_VIEWS, figsize=(7.2, 1.45 * len(kinds)), squeeze=False)
+    for row, k in zip(axes, kinds):
+        i = int(np.flatnonzero((data["query"] == k) & data["positive"])[0])
+        for v, ax in enumerate(row):
+            ax.imshow(record.colorize(data["seg"][i, v]), interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+        source = "last 4 frames" if k == classifier.OUTDOOR else "panorama 0/90/180/270°"
+        on = [rooms.ROOM_TYPES[j] for j in np.flatnonzero(data["bits"][i])]
+        row[0].set_ylabel(rooms.ROOM_TYPES[k], fontsize=8)
+        row[-1].yaxis.set_label_position("right")
+        row[-1].set_ylabel(f"{source}\nbits: {', '.join(on)}", fontsize=6, rotation=0, ha="left", va="center")
+    fig.suptitle("Room classifier samples (validation houses), one positive per type", fontsize=9)
+    fig.tight_layout()
+    topdown.save_figure(fig, path)
+
+
 # -- command line ------------------------------------------------------------------------------------
 
 
@@ -425,6 +453,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"stopped after epoch {trainer.epoch} of {config.epochs}; rerun the same command to resume")
     print(f"{trainer.model.num_parameters():,} parameters; best checkpoint {trainer.best_path}")
     print(format_metrics(best))
+    plot_samples(trainer.data("valid"), trainer.out / "samples.png")
+    print(f"wrote {trainer.out / 'samples.png'}")
     return 0
 
 
