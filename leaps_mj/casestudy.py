@@ -30,8 +30,9 @@ MAX_PANELS = 6
 
 
 def node_color(node: str):
-    """A distinct colour per graph node (sub-target), shared by map and legend."""
-    return plt.get_cmap("tab10")(rooms.room_index(node))
+    """A distinct colour per graph node (sub-target); tab10 without its red, which marks plans."""
+    palette = [c for k, c in enumerate(plt.get_cmap("tab10").colors) if k != 3]
+    return palette[rooms.room_index(node)]
 
 
 class Trace:
