@@ -50,6 +50,7 @@ import tqdm
 from leaps_mj import agents as agents_lib
 from leaps_mj import dataset as dataset_lib
 from leaps_mj import episodes as episodes_lib
+from leaps_mj import record as record_lib
 from leaps_mj import semantic
 
 
@@ -208,8 +209,9 @@ def select_episodes(specs, per_length: int | None = None, limit: int | None = No
 _WORKER: dict = {}
 
 
-def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None) -> None:
-    """Per-process state: the environment, the episodes, the LEAPS model, the learned sub-policy."""
+def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, record=None) -> None:
+    """Per-process state: the environment, the episodes, the LEAPS model, the learned sub-policy,
+    and where to record episodes (``(folder, mode)`` or None)."""
     import leaps_mj
 
     _WORKER.clear()
@@ -218,6 +220,8 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None) -> No
                                    horizon=config.horizon)
     _WORKER["specs"] = episodes_lib.load_split(config.dataset, config.split)
     _WORKER["model"] = model
+    _WORKER["record"] = record
+    _WORKER["recorders"] = {}
     _WORKER["subpolicy"] = None
     if config.subpolicy == "learned":
         from leaps_mj import policies
@@ -239,6 +243,19 @@ def _build_agent(spec: AgentSpec, seed: int):
     return agents_lib.make_agent(spec.name, env, subpolicy=_WORKER["subpolicy"], seed=seed, **kwargs)
 
 
+def _observer(label: str):
+    """This worker's MCAP episode recorder for an agent (None without ``--record``)."""
+    if _WORKER["record"] is None:
+        return None
+    folder, mode = _WORKER["record"]
+    recorders = _WORKER["recorders"]
+    if label not in recorders:
+        run_config = {**dataclasses.asdict(_WORKER["config"]), "agent": label}
+        recorders[label] = record_lib.recorder_for_evaluation(folder / label, mode, seed=_WORKER["config"].seed,
+                                                              run_config=run_config)
+    return recorders[label]
+
+
 def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     """Runs one agent on a chunk of episode indices, in a worker."""
     spec, indices = job
@@ -246,7 +263,7 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     rows = []
     for i in indices:
         agent = _build_agent(spec, episode_seed(config.seed, i))
-        result = run_episode(env, agent, specs[i], config.horizon)
+        result = run_episode(env, agent, specs[i], config.horizon, observer=_observer(spec.label))
         rows.append({"episode": i, **{k: result[k] for k in CSV_FIELDS if k != "episode"}})
     return spec, rows
 
@@ -307,7 +324,8 @@ def _check_config(out: pathlib.Path, config: EvalConfig) -> None:
 
 
 def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: int = 1, chunk: int = 4,
-        progress: bool = True, model: semantic.SemanticModel | None = None) -> dict[str, list[dict]]:
+        progress: bool = True, model: semantic.SemanticModel | None = None,
+        record: tuple[pathlib.Path, str] | None = None) -> dict[str, list[dict]]:
     """Runs every agent on the selected episodes, resuming from the CSVs in ``out``.
 
     Args:
@@ -320,6 +338,8 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
       progress: show a tqdm bar.
       model: the LEAPS semantic model; None loads ``config.prior`` (then
         ``config.prior`` may name anything identifying the model, e.g. a hash).
+      record: ``(folder, mode)`` to write MCAP records of the episodes run to
+        ``folder/<agent>/`` (mode: all, failures or sample:K), or None.
 
     Returns:
       label -> rows of the selected episodes, sorted by episode.
@@ -339,12 +359,13 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
         jobs += [(spec, todo[k:k + chunk]) for k in range(0, len(todo), chunk)]
     total = sum(len(j[1]) for j in jobs)
     if workers > 1 and len(jobs) > 1:
-        pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)), _init_worker, (config, model))
+        pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)), _init_worker,
+                                                         (config, model, record))
         results = pool.imap_unordered(_run_chunk, jobs)
     else:
         pool = None
         if jobs:
-            _init_worker(config, model)
+            _init_worker(config, model, record)
         results = map(_run_chunk, jobs)
     try:
         with tqdm.tqdm(total=total, desc="evaluate: episodes", disable=not progress) as bar:
@@ -566,6 +587,9 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--record", type=pathlib.Path, metavar="DIR",
+                   help="write MCAP episode records to DIR/<agent>/ (see docs/records.md)")
+    p.add_argument("--record-mode", default="failures", help="all, failures or sample:K (default: failures)")
     args = p.parse_args(argv)
     horizons = sorted(set(args.horizon))
     if horizons[0] < 1:
@@ -575,11 +599,14 @@ def main(argv=None) -> int:
                             prior=args.prior, replan_every=args.replan_every, seed=args.seed)
         if "leaps" in " ".join(args.agent):
             agents_lib.load_model(args.prior)  # fail now, not in a worker
+        if args.record:
+            record_lib.parse_mode(args.record_mode)  # fail now, not in a worker
         specs = episodes_lib.load_split(args.dataset, args.split)
         per_length = args.episodes_per_length or SUBSETS[args.subset]
         indices = select_episodes(specs, per_length, args.limit, args.seed)
         table = run(config, [AGENTS[a] for a in args.agent], indices, args.out, workers=args.workers,
-                    progress=not args.no_progress)
+                    progress=not args.no_progress,
+                    record=(args.record, args.record_mode) if args.record else None)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -116,3 +116,21 @@ def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
     assert out.stat().st_size > 50_000
     assert "replans:" in capsys.readouterr().out
     assert casestudy.main(argv[:1] + ["999"] + argv[2:]) == 2
+
+
+def test_main_records_episodes_as_mcap(tiny_dataset, tmp_path, capsys):
+    from leaps_mj import replay
+
+    out, rec = tmp_path / "eval", tmp_path / "records"
+    code = evaluate.main(["--agent", "random", "leaps", "--dataset", str(tiny_dataset), "--split", "test",
+                          "--horizon", "20", "--out", str(out), "--limit", "2", "--no-progress",
+                          "--record", str(rec), "--record-mode", "all"])
+    assert code == 0
+    for label in ("random", "leaps"):
+        files = sorted((rec / label).glob("*.mcap"))
+        assert len(files) == 2
+        episode = replay.load(files[0])
+        assert 1 <= episode.num_steps <= 20
+    assert evaluate.main(["--agent", "random", "--dataset", str(tiny_dataset), "--out", str(tmp_path / "e2"),
+                          "--record", str(rec), "--record-mode", "bogus"]) == 2
+    assert "record mode 'bogus'" in capsys.readouterr().err
