@@ -17,7 +17,11 @@ split with the task's seeded RNG, or runs an :class:`EpisodeSpec` given to
 
 Success ("see", from the paper): the agent is in a room of the target type
 and at least 4.5 % of the frame shows that room type's objects *in that room*
-for 3 consecutive steps; for outdoor, being there suffices. The episode then
+for 3 consecutive steps; for outdoor, being there suffices. The untyped
+``indoor`` node (hallways, closets) may also be a target, for training the
+sub-policy LEAPS runs when its plan goes through a hallway: being in untyped
+indoor space (all semantic bits off) suffices, and its ``target`` one-hot is
+all zero. The episode then
 terminates (discount 0); the horizon truncates it (discount 1).
 """
 
@@ -59,7 +63,8 @@ class EnvConfig:
       rgb: also render a colour image (a second render pass).
       success_fraction: fraction of pixels of target objects for "see".
       success_steps: consecutive steps the see test must hold.
-      targets: room types that may be drawn as targets (default: all 8).
+      targets: room types that may be drawn as targets (default: all 8;
+        ``indoor`` is allowed too, see the module docstring).
       max_start_distance: if set, sampled starts are at most this many
         geodesic metres from the target (curriculum / short training episodes).
       min_start_distance: sampled starts are at least this far (metres).
@@ -98,8 +103,8 @@ class EnvConfig:
             raise ValueError(f"success_steps {self.success_steps!r}: expected a positive integer")
         object.__setattr__(self, "targets", tuple(self.targets))
         for t in self.targets:
-            if t not in rooms.ROOM_TYPES:
-                raise ValueError(f"unknown target room type {t!r}; expected one of {list(rooms.ROOM_TYPES)}")
+            if t not in rooms.GRAPH_NODES:
+                raise ValueError(f"unknown target room type {t!r}; expected one of {list(rooms.GRAPH_NODES)}")
         if not self.targets:
             raise ValueError("targets is empty: expected at least one room type")
         if self.max_start_distance is not None and self.max_start_distance <= self.min_start_distance:
@@ -173,7 +178,8 @@ class HouseModel:
         self.grid = navgrid.NavGrid(house)
         ngeom = model.ngeom
         self.seg_lut = np.zeros(ngeom + 1, dtype=np.uint8)
-        self.see_lut = np.zeros((rooms.NUM_ROOM_TYPES, ngeom + 1), dtype=bool)
+        # One row per graph node; the indoor row stays empty (nothing to see).
+        self.see_lut = np.zeros((len(rooms.GRAPH_NODES), ngeom + 1), dtype=bool)
         for g in range(ngeom):
             parts = model.geom(g).name.split("__")
             cls = parts[0].split("/")[-1]
@@ -204,6 +210,15 @@ class HouseModel:
         if not inside.any() and self._has_yard:
             bits[rooms.room_index("outdoor")] = 1
         return bits
+
+    @staticmethod
+    def in_node(bits: np.ndarray, node: int) -> bool:
+        """Whether semantic bits place the agent in graph node ``node``.
+
+        The ``indoor`` node is untyped indoor space: no bit on (the yard sets
+        the outdoor bit).
+        """
+        return bool(bits[node]) if node < rooms.NUM_ROOM_TYPES else not bits.any()
 
     def distance_map(self, target: str) -> np.ndarray:
         """Geodesic metres to the nearest room of ``target`` from every cell.
@@ -340,7 +355,7 @@ class RoomNav(base.Task):
         xy = spec.start[:2]
         self.distance = hm.geodesic(xy, spec.target)
         self.bits = hm.semantic_bits(*xy)
-        self.in_target = bool(self.bits[self.target_index])
+        self.in_target = hm.in_node(self.bits, self.target_index)
         self._render(physics)
         self.prev_fraction = self.target_fraction
 
@@ -374,9 +389,9 @@ class RoomNav(base.Task):
         self.prev_distance, self.distance = self.distance, hm.geodesic(pose[:2], self.episode.target)
         self.was_in_target = self.in_target
         self.bits = hm.semantic_bits(*pose[:2])
-        self.in_target = bool(self.bits[self.target_index])
-        outdoor = self.episode.target == "outdoor"
-        sees = self.in_target and (outdoor or self.target_fraction >= self.config.success_fraction)
+        self.in_target = hm.in_node(self.bits, self.target_index)
+        nothing_to_see = not rooms.SEE_OBJECTS.get(self.episode.target)
+        sees = self.in_target and (nothing_to_see or self.target_fraction >= self.config.success_fraction)
         self.success_streak = self.success_streak + 1 if sees else 0
         self.success = self.success_streak >= self.config.success_steps
 
@@ -398,7 +413,8 @@ class RoomNav(base.Task):
     def get_observation(self, physics):
         pose = physics.agent_pose()
         target = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.uint8)
-        target[self.target_index] = 1
+        if self.target_index < rooms.NUM_ROOM_TYPES:
+            target[self.target_index] = 1
         obs = collections.OrderedDict(
             segmentation=self.segmentation.copy(),
             depth=self.depth.copy(),

@@ -267,3 +267,17 @@ def test_switching_houses_renders_each_house_correctly(tiny_dataset):
         fresh.close()
         np.testing.assert_array_equal(obs["segmentation"], ref["segmentation"])
         np.testing.assert_allclose(obs["depth"], ref["depth"])
+
+
+def test_indoor_target_means_untyped_space(tiny_dataset):
+    """``indoor`` (hallways) can be a target, for the sub-policy of hallway hops."""
+    e = leaps_mj.load(str(tiny_dataset), "train", seed=3, width=32, height=24, horizon=300,
+                      targets=("indoor",), reward="sparse")
+    oracle = expert.GeodesicExpert(e)
+    for _ in range(3):
+        ts = e.reset()
+        assert e.episode.target == "indoor" and ts.observation["target"].sum() == 0
+        while not ts.last():
+            ts = e.step(oracle.act())
+        assert ts.reward == 1.0 and not ts.observation["semantic"].any()
+    e.close()
