@@ -11,9 +11,11 @@ segmentation + depth frames. Three methods:
   Adam (lr 1e-3, weight decay 1e-5), gradient clipping at 1.
 * ``dagger`` — imitation of :class:`leaps_mj.expert.GeodesicExpert` with
   DAgger: the expert labels every state the rollouts visit (it runs in the
-  worker, next to its environment); each episode is driven by the expert with
-  probability β (decaying linearly to 0) and by the learner otherwise; the
-  policy minimises the cross-entropy to the labels on the fresh unroll and on
+  worker, next to its environment). The first ``learner_envs`` environments
+  are always driven by the learner (on-policy data, and the success curve);
+  in the others each step's action is the expert's with probability β
+  (decaying linearly from 1 to ``beta_min``), else the learner's. The policy
+  minimises the cross-entropy to the labels on the fresh unroll and on
   unrolls replayed from the aggregated dataset, and the value head regresses
   the n-step returns so that A2C fine-tuning starts with a trained critic.
 * ``dagger+a2c`` — DAgger for ``dagger_fraction`` of the steps, then A2C.
@@ -76,8 +78,14 @@ class TrainConfig:
       method: "a2c", "dagger" or "dagger+a2c".
       total_steps: Environment steps per target (all environments together).
       dagger_fraction: Share of the iterations spent on DAgger in "dagger+a2c".
-      beta_fraction: Share of the DAgger iterations over which the probability
-        that the expert drives an episode decays linearly from 1 to 0.
+      beta_fraction: Share of the DAgger iterations over which β, the
+        probability that the expert takes a step of a mixed environment,
+        decays linearly from 1 to ``beta_min``.
+      beta_min: Final β of the DAgger phase. Above 0, mixed environments keep
+        following the expert with the learner's deviations (DART-like): the
+        learner's own early rollouts mostly turn on the spot, and labels from
+        them alone teach it to keep turning.
+      learner_envs: Environments always driven by the learner alone.
       replay: Extra DAgger updates per iteration, each on one unroll drawn
         from the aggregated dataset.
       buffer_steps: Samples kept in the aggregated dataset (oldest dropped).
@@ -115,6 +123,8 @@ class TrainConfig:
     total_steps: int = 20_000_000
     dagger_fraction: float = 0.7
     beta_fraction: float = 0.5
+    beta_min: float = 0.0
+    learner_envs: int = 1
     replay: int = 2
     buffer_steps: int = 50_000
     num_envs: int = 64
@@ -150,7 +160,7 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")
-        for name in ("dagger_fraction", "beta_fraction", "gamma"):
+        for name in ("dagger_fraction", "beta_fraction", "beta_min", "gamma"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a value in [0, 1]")
         for name in ("lr", "start_distance", "max_distance", "max_grad_norm"):
@@ -159,6 +169,8 @@ class TrainConfig:
         for name in ("weight_decay", "entropy", "value_coef", "logits_l2", "distance_step"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
+        if not isinstance(self.learner_envs, int) or not 0 <= self.learner_envs <= self.num_envs:
+            raise ValueError(f"learner_envs {self.learner_envs!r}: expected an integer in [0, num_envs]")
         self.policy_config()  # validates the network fields
 
     def policy_config(self) -> nets.PolicyConfig:
@@ -188,11 +200,11 @@ class TrainConfig:
         return min(self.max_distance, self.start_distance + self.distance_step * stage)
 
     def beta_at(self, iteration: int) -> float:
-        """Probability that the expert drives an episode begun at an iteration."""
+        """Probability that the expert takes a step of a mixed environment at an iteration."""
         if iteration >= self.dagger_iterations:
             return 0.0
         decay = max(1, round(self.beta_fraction * self.dagger_iterations))
-        return max(0.0, 1.0 - iteration / decay)
+        return max(self.beta_min, 1.0 - iteration / decay)
 
 
 PRESETS = {
@@ -206,8 +218,8 @@ PRESETS = {
     # narrow net, 32 houses with the target (4 per worker), DAgger only.
     "cpu": TrainConfig(
         num_houses=32, width=40, height=30, conv_channels=(16, 32, 32, 32), hidden=128, lstm=64,
-        method="dagger", total_steps=96_000, replay=3, num_envs=8,
-        start_distance=4.0, curriculum_iterations=80, max_distance=16.0, checkpoint_every=10),
+        method="dagger", total_steps=108_000, beta_min=0.5, learner_envs=2, replay=3, num_envs=8,
+        start_distance=4.0, curriculum_iterations=90, max_distance=13.0, checkpoint_every=10),
     # The paper's setting, for a GPU or a cluster (not run on the CPU machine).
     "paper": TrainConfig(),
 }
@@ -433,18 +445,18 @@ class Unroll:
 
 
 class EpisodeStats:
-    """Outcomes of the episodes finished in rollouts, by who drove them."""
+    """Outcomes of the last ``window`` episodes finished in rollouts: learner-driven or mixed."""
 
-    def __init__(self, num_envs: int, window: int = 100):
+    def __init__(self, num_envs: int, window: int = 50):
         self.returns = np.zeros(num_envs)
-        self.recent = {"learner": collections.deque(maxlen=window), "expert": collections.deque(maxlen=window)}
+        self.recent = {"learner": collections.deque(maxlen=window), "mixed": collections.deque(maxlen=window)}
         self.finished = 0
 
-    def record(self, i: int, ts, by_expert: bool) -> None:
+    def record(self, i: int, ts, mixed: bool) -> None:
         if ts.reward is not None:
             self.returns[i] += ts.reward
         if ts.last():
-            self.recent["expert" if by_expert else "learner"].append(
+            self.recent["mixed" if mixed else "learner"].append(
                 (float(ts.discount == 0.0), self.returns[i]))
             self.returns[i] = 0.0
             self.finished += 1
@@ -454,7 +466,7 @@ class EpisodeStats:
         for who, items in self.recent.items():
             if items:
                 arr = np.array(items)
-                prefix = "" if who == "learner" else "expert_"
+                prefix = "" if who == "learner" else "mixed_"
                 out[f"{prefix}success_rate"] = float(arr[:, 0].mean())
                 out[f"{prefix}episode_return"] = float(arr[:, 1].mean())
         return out
@@ -558,24 +570,21 @@ class Trainer:
         with TrainingVectorEnv(self._worker_kwargs(), seed, c, self.iteration, label) as envs:
             timesteps = envs.reset()
             state = self.model.initial_state(c.num_envs, self.device)
-            drivers = np.zeros(c.num_envs, dtype=bool)
             stats = EpisodeStats(c.num_envs)
             while self.iteration < last:
                 t0 = time.perf_counter()
                 rng = np.random.default_rng([c.seed, rooms.room_index(self.target), self.iteration])
                 gen = torch.Generator(device=self.device).manual_seed(int(rng.integers(2**63)))
                 beta = c.beta_at(self.iteration)
-                unroll, batch, timesteps, state, drivers, rollout_times = self._rollout(
-                    envs, timesteps, state, drivers, beta, rng, gen, stats)
-                t1 = time.perf_counter()
+                unroll, batch, timesteps, state, rollout_times = self._rollout(
+                    envs, timesteps, state, beta, rng, gen, stats)
                 scalars = self._update(unroll, batch, rng)
                 self.iteration += 1
                 self.global_step += c.batch
                 dt = time.perf_counter() - t0
                 self.elapsed += dt
                 scalars.update(stats.summary(), beta=beta, start_distance=c.start_distance_at(self.iteration - 1),
-                               SPS=c.batch / dt, episodes=stats.finished, update_seconds=time.perf_counter() - t1,
-                               **rollout_times)
+                               SPS=c.batch / dt, episodes=stats.finished, **rollout_times)
                 self._log(writer, csv_log, scalars)
                 bar.update(c.batch)
                 bar.set_postfix(sps=f"{scalars['SPS']:.0f}", success=f"{scalars.get('success_rate', 0):.2f}",
@@ -585,7 +594,7 @@ class Trainer:
         bar.close()
         writer.close()
 
-    def _rollout(self, envs, timesteps, state, drivers, beta, rng, gen, stats):
+    def _rollout(self, envs, timesteps, state, beta, rng, gen, stats):
         """Collects one unroll; returns it with the A2C batch and the carried state."""
         c = self.config
         T, B = c.t_max, c.num_envs
@@ -605,21 +614,20 @@ class Trainer:
                 x = nets.ActorCritic.preprocess(obs, self.device)
                 logits, value, new_state = self.model(x, state, torch.as_tensor(is_first, device=self.device))
                 learner = torch.multinomial(torch.softmax(logits, -1), 1, generator=gen).squeeze(-1).cpu().numpy()
-            times["forward_seconds"] += time.perf_counter() - f0
+            times["act_forward_seconds"] += self._elapsed(f0)
             values[t] = value.cpu().numpy()
             if t == T:
                 break
             state = new_state
             seg[t], depth[t], first[t], labels[t] = obs["segmentation"], obs["depth"], is_first, obs["expert_action"]
             valid[t] = [not ts.last() for ts in timesteps]
-            draws = rng.random(B) < beta
-            drivers = np.where(is_first > 0, draws, drivers)
-            actions[t] = np.where(drivers & (labels[t] >= 0), labels[t], learner)
+            expert = (rng.random(B) < beta) & (np.arange(B) >= c.learner_envs) & (labels[t] >= 0)
+            actions[t] = np.where(expert, labels[t], learner)
             e0 = time.perf_counter()
             timesteps = envs.step([int(a) for a in actions[t]])
             times["env_wait_seconds"] += time.perf_counter() - e0
             for i, ts in enumerate(timesteps):
-                stats.record(i, ts, bool(drivers[i]))
+                stats.record(i, ts, i >= c.learner_envs and beta > 0)
                 times["worker_physics_seconds"] += ts.observation["step_seconds"][0]
                 times["worker_render_seconds"] += ts.observation["step_seconds"][1]
                 times["worker_expert_seconds"] += ts.observation["step_seconds"][2]
@@ -630,24 +638,34 @@ class Trainer:
         returns = n_step_returns(rewards, discounts, values[1:], bootstrap)
         unroll = Unroll(seg, depth, first, valid, labels, start_state)
         batch = {"actions": actions, "returns": returns.astype(np.float32)}
-        return unroll, batch, timesteps, state, drivers, dict(times)
+        return unroll, batch, timesteps, state, dict(times)
+
+    def _elapsed(self, since: float) -> float:
+        """Seconds since ``since``, after the device's queued work is done."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        return time.perf_counter() - since
 
     def _unroll_forward(self, unroll: Unroll):
+        t0 = time.perf_counter()
         obs, first, state = unroll.tensors(self.device)
         logits, values, _ = self.model.forward_sequence(obs, state, first)
+        self._times["update_forward_seconds"] += self._elapsed(t0)
         return logits, values
 
     def _step(self, loss: torch.Tensor) -> float:
+        t0 = time.perf_counter()
         self.optimizer.zero_grad()
         loss.backward()
         norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
         self.optimizer.step()
+        self._times["update_backward_seconds"] += self._elapsed(t0)
         return norm.item()
 
     def _update(self, unroll: Unroll, batch: dict, rng: np.random.Generator) -> dict[str, float]:
         """One update on the fresh unroll (+ replayed DAgger updates); returns log scalars."""
         c = self.config
-        t0 = time.perf_counter()
+        self._times = collections.Counter()
         dev = self.device
         valid = torch.as_tensor(unroll.valid, device=dev)
         returns = torch.as_tensor(batch["returns"], device=dev)
@@ -673,8 +691,7 @@ class Trainer:
                 _, out["expert_agreement"] = bc_loss(logits.detach(), torch.as_tensor(unroll.labels, device=dev),
                                                      valid)
             out["grad_norm"] = self._step(loss)
-        out["backward_seconds"] = time.perf_counter() - t0
-        return out
+        return {**out, **self._times}
 
     def _log(self, writer, csv_log, scalars: dict[str, float]) -> None:
         row = {"iteration": self.iteration, "global_step": self.global_step,
@@ -695,9 +712,9 @@ class _CsvLog:
     """Appends rows to a CSV file (header from the first row; resumed runs append)."""
 
     FIELDS = ("iteration", "global_step", "phase", "SPS", "beta", "start_distance", "success_rate",
-              "episode_return", "expert_success_rate", "expert_episode_return", "episodes",
+              "episode_return", "mixed_success_rate", "mixed_episode_return", "episodes",
               "bc_cross_entropy", "bc_accuracy", "expert_agreement", "policy_loss", "value_loss", "entropy",
-              "logits_l2", "grad_norm", "forward_seconds", "backward_seconds", "update_seconds",
+              "logits_l2", "grad_norm", "act_forward_seconds", "update_forward_seconds", "update_backward_seconds",
               "env_wait_seconds", "worker_physics_seconds", "worker_render_seconds", "worker_expert_seconds")
 
     def __init__(self, path: pathlib.Path, keep_through: int):
@@ -706,11 +723,11 @@ class _CsvLog:
         rows = []
         if path.exists():
             with open(path, newline="") as f:
-                rows = [r for r in csv.reader(f)][1:]
+                rows = list(csv.DictReader(f))
         text = io.StringIO()
-        writer = csv.writer(text)
-        writer.writerow(self.FIELDS)
-        writer.writerows(r for r in rows if int(r[0]) <= keep_through)
+        writer = csv.DictWriter(text, self.FIELDS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(r for r in rows if int(r["iteration"]) <= keep_through)
         dataset_lib.write_atomic(path, text.getvalue().encode())
 
     def write(self, row: dict[str, Any]) -> None:
@@ -825,9 +842,9 @@ def plot_curves(out: str | os.PathLike, targets: Sequence[str], path: str | os.P
         log = read_progress(pathlib.Path(out) / target / "progress.csv")
         steps = log["global_step"] / 1000
         ax.plot(steps, log["success_rate"], color="C0", label="success (learner drives)")
-        if not np.all(np.isnan(log["expert_success_rate"])):
-            ax.plot(steps, log["expert_success_rate"], color="C2", alpha=0.6, label="success (expert drives)")
-        ax.plot(steps, log["beta"], color="C7", ls=":", label="β (expert drives)")
+        if not np.all(np.isnan(log["mixed_success_rate"])):
+            ax.plot(steps, log["mixed_success_rate"], color="C2", alpha=0.6, label="success (expert steps w.p. β)")
+        ax.plot(steps, log["beta"], color="C7", ls=":", label="β")
         a2c = np.flatnonzero(log["phase"] == "a2c")
         if len(a2c) and a2c[0] > 0:
             ax.axvline(steps[a2c[0]], color="C3", ls="--", lw=1, label="DAgger → A2C")
@@ -844,8 +861,38 @@ def plot_curves(out: str | os.PathLike, targets: Sequence[str], path: str | os.P
     handles.append(matplotlib.lines.Line2D([], [], color="C1", lw=1))
     labels.append("max start distance (m, right axis)")
     fig.legend(handles, labels, loc="lower center", ncol=5, fontsize=8, bbox_to_anchor=(0.5, -0.02))
-    fig.suptitle("Sub-policy training: success of rollout episodes (moving window of 100)")
+    fig.suptitle("Sub-policy training: success of rollout episodes (last 50 episodes)")
     fig.tight_layout(rect=(0, 0.04, 1, 1))
+    topdown.save_figure(fig, path)
+
+
+def plot_comparison(runs: dict[str, str | os.PathLike], target: str, path: str | os.PathLike) -> None:
+    """Success of learner-driven rollout episodes of one target, for runs of several methods.
+
+    Args:
+      runs: Output folders by label (e.g. {"DAgger": "runs/policy_cpu", "A2C": ...}).
+      target: The target trained in every run.
+      path: PNG to write.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from leaps_mj import topdown
+
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
+    for i, (label, folder) in enumerate(runs.items()):
+        log = read_progress(pathlib.Path(folder) / target / "progress.csv")
+        _, _, extra = nets.load_policy(pathlib.Path(folder) / f"{target}.pt")
+        valid = (extra.get("eval") or {}).get("valid/sampled", {}).get("success_rate")
+        suffix = f" (valid eval {valid:.2f})" if valid is not None else ""
+        ax.plot(log["global_step"] / 1000, log["success_rate"], color=f"C{i}", label=label + suffix)
+    ax.set_xlabel("env steps (k)")
+    ax.set_ylabel("success of learner-driven episodes")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(f"{target}: methods on the same budget (last 50 episodes)")
+    ax.legend(fontsize=8)
     topdown.save_figure(fig, path)
 
 

@@ -113,8 +113,14 @@ def test_load_default_names_the_training_command_when_missing(monkeypatch, tmp_p
         policies.load_default()
 
 
-def test_load_default_loads_the_shipped_policies():
-    if not all((policies.DEFAULT_DIR / f"{t}.pt").is_file() for t in rooms.ROOM_TYPES):
-        pytest.skip("shipped checkpoints not present")
-    policy = policies.load_default()
+def test_load_default_loads_the_shipped_policies(tiny_dataset):
+    policy = policies.load_default(seed=0)
     assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.ROOM_TYPES
+    assert all(meta["iteration"] == 450 and meta["eval"] for meta in policy.metadata.values())
+    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=5)  # 3x: subsampled
+    try:
+        env.reset()
+        actions = run(policy, env, env.episode, steps=4)
+    finally:
+        env.close()
+    assert all(0 <= a < rooms.NUM_ACTIONS for a in actions)

@@ -75,10 +75,12 @@ def test_curriculum_and_beta_schedules():
     assert [c.start_distance_at(i) for i in (0, 99, 100, 250, 10_000)] == [4.0, 4.0, 7.0, 10.0, 12.0]
     assert c.dagger_iterations == 500
     assert c.beta_at(0) == 1.0 and c.beta_at(125) == 0.5 and c.beta_at(250) == 0.0 and c.beta_at(600) == 0.0
+    floored = dataclasses.replace(c, beta_min=0.3)
+    assert floored.beta_at(200) == 0.3 and floored.beta_at(499) == 0.3 and floored.beta_at(500) == 0.0
 
 
 @pytest.mark.parametrize("bad", [dict(method="ppo"), dict(num_envs=0), dict(gamma=1.5), dict(lr=0.0),
-                                 dict(conv_channels=())])
+                                 dict(conv_channels=()), dict(learner_envs=3), dict(beta_min=-0.1)])
 def test_config_rejects_bad_values(bad):
     with pytest.raises(ValueError):
         dataclasses.replace(train_policy.PRESETS["tiny"], **bad)

@@ -1,0 +1,97 @@
+"""Sub-policy training throughput, end to end, and where the time goes.
+
+``python benchmarks/train_throughput.py [--presets cpu paper] [--iterations 4] [--num-envs 8] [--device cpu]``
+
+Runs a few iterations of :class:`leaps_mj.train_policy.Trainer` per preset
+(in a temporary folder; the first ``--warmup`` iterations, which compile the
+houses, are not counted) and prints one row per preset: training samples per
+second of wall-clock, and per 1000 samples the seconds spent
+
+* in the learner process: acting forward passes, the environment step wait,
+  the update's forward (unrolls through the CNN+LSTM) and its backward
+  (gradients + Adam);
+* in the environment workers (CPU-seconds, summed over workers that run in
+  parallel): physics and collisions (``Task.before_step``), rendering and the
+  success test (``Task.after_step``), and expert labelling (DAgger).
+
+All of it is measured in the same run, from the trainer's own timers (the
+``*_seconds`` columns of ``progress.csv``). Each preset runs its own method:
+cpu is DAgger (3 replayed updates per iteration), paper is A2C (no expert).
+The paper preset's 64 environments are replaced by ``--num-envs`` so that it
+fits this machine's memory; its network and resolution are the paper's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import tempfile
+
+import numpy as np
+
+from leaps_mj import nets, train_policy
+
+_COLUMNS = (
+    ("act_forward_seconds", "act fwd"),
+    ("env_wait_seconds", "env wait"),
+    ("update_forward_seconds", "upd fwd"),
+    ("update_backward_seconds", "upd bwd"),
+    ("worker_render_seconds", "render*"),
+    ("worker_physics_seconds", "physics*"),
+    ("worker_expert_seconds", "expert*"),
+)
+
+
+def measure(preset: str, iterations: int, warmup: int, num_envs: int, device: str, dataset: str,
+            target: str) -> dict:
+    """Trains ``warmup + iterations`` iterations of a preset; returns the measured means."""
+    base = train_policy.PRESETS[preset]
+    config = dataclasses.replace(base, dataset=dataset, num_envs=num_envs,
+                                 total_steps=(warmup + iterations) * num_envs * base.t_max,
+                                 checkpoint_every=warmup + iterations)
+    with tempfile.TemporaryDirectory(prefix="train_throughput_") as out:
+        trainer = train_policy.Trainer(config, target, out, device=device, progress=False)
+        trainer.train()
+        log = train_policy.read_progress(f"{out}/{target}/progress.csv")
+    rows = slice(warmup, None)
+    per_k = 1000 / config.batch
+    return {
+        "preset": preset, "method": config.method, "resolution": f"{config.width}x{config.height}",
+        "params": nets.ActorCritic(config.policy_config()).num_parameters(), "envs": num_envs,
+        "sps": config.batch * len(log["SPS"][rows]) / np.sum(config.batch / log["SPS"][rows]),
+        **{key: float(np.nan_to_num(np.mean(log[key][rows]))) * per_k for key, _ in _COLUMNS},
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--presets", nargs="+", default=["cpu", "paper"], choices=sorted(train_policy.PRESETS))
+    parser.add_argument("--iterations", type=int, default=4, help="measured iterations per preset")
+    parser.add_argument("--warmup", type=int, default=2, help="iterations not counted (house compilation)")
+    parser.add_argument("--num-envs", type=int, default=8, help="environment worker processes")
+    parser.add_argument("--device", default="cpu", help="torch device of the learner")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of the learner")
+    parser.add_argument("--dataset", default="roomnav-v1")
+    parser.add_argument("--target", default="kitchen")
+    args = parser.parse_args(argv)
+    if args.iterations < 1 or args.warmup < 0 or args.num_envs < 1 or args.threads < 1:
+        raise ValueError(f"--iterations {args.iterations}, --warmup {args.warmup}, --num-envs {args.num_envs}, "
+                         f"--threads {args.threads}: expected iterations, envs, threads >= 1 and warmup >= 0")
+    import torch
+
+    torch.set_num_threads(args.threads)
+    results = [measure(p, args.iterations, args.warmup, args.num_envs, args.device, args.dataset, args.target)
+               for p in args.presets]
+    head = f"{'preset':7} {'method':10} {'frames':7} {'params':>9} {'envs':>4} {'samples/s':>9} | "
+    print(f"seconds per 1000 training samples (device {args.device}, {args.threads} learner thread(s); "
+          "* = CPU-seconds in the env workers, summed over workers)")
+    print(head + " ".join(f"{name:>8}" for _, name in _COLUMNS))
+    for r in results:
+        print(f"{r['preset']:7} {r['method']:10} {r['resolution']:7} {r['params']:9,d} {r['envs']:4d} "
+              f"{r['sps']:9.1f} | " + " ".join(f"{r[key]:8.2f}" for key, _ in _COLUMNS))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
