@@ -252,3 +252,47 @@ class ClassifierBits(dm_env.Environment):
 
     def close(self) -> None:
         self._env.close()
+
+
+class BitAgreement:
+    """An episode observer (see :func:`leaps_mj.evaluate.run_episode`) scoring the bits an agent saw against the truth.
+
+    Run episodes on a :class:`ClassifierBits` environment with it: every
+    step it compares ``timestep.observation["semantic"]`` with the task's
+    ground-truth bits and counts, per room type, true positives, false
+    positives and false negatives, and the steps on which all bits agree.
+    """
+
+    def __init__(self):
+        self.steps = 0
+        self.exact = 0
+        self.tp = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.int64)
+        self.fp = np.zeros_like(self.tp)
+        self.fn = np.zeros_like(self.tp)
+        self._task = None
+
+    def begin(self, env, spec, agent) -> None:
+        del spec, agent
+        self._task = env.task
+
+    def step(self, timestep, action, info) -> None:
+        del action, info
+        seen = np.asarray(timestep.observation["semantic"], dtype=bool)
+        truth = np.asarray(self._task.bits, dtype=bool)
+        self.steps += 1
+        self.exact += bool(np.array_equal(seen, truth))
+        self.tp += seen & truth
+        self.fp += seen & ~truth
+        self.fn += ~seen & truth
+
+    def end(self, result) -> None:
+        del result
+
+    def summary(self) -> dict:
+        """``{"steps", "exact", "types": {type: {"truth_steps", "precision", "recall"}}}`` (nan where undefined)."""
+        def ratio(a, b):
+            return float(a / b) if b else float("nan")
+
+        return {"steps": self.steps, "exact": ratio(self.exact, self.steps), "types": {
+            t: {"truth_steps": int(self.tp[k] + self.fn[k]), "precision": ratio(self.tp[k], self.tp[k] + self.fp[k]),
+                "recall": ratio(self.tp[k], self.tp[k] + self.fn[k])} for k, t in enumerate(rooms.ROOM_TYPES)}}

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import leaps_mj
-from leaps_mj import classifier, episodes, nets, rooms, train_classifier
+from leaps_mj import agents, classifier, episodes, evaluate, nets, rooms, train_classifier
 
 KITCHEN = rooms.room_index("kitchen")
 
@@ -177,3 +177,20 @@ def test_tiny_trainer_saves_resumes_and_refuses_another_config(tiny_dataset, tmp
         train_classifier.Trainer(dataclasses.replace(config, lr=0.5), tmp_path, progress=False)
     with pytest.raises(ValueError, match="no classifier checkpoint"):
         classifier.RoomTypeClassifier.load(tmp_path / "missing.pt")
+
+
+def test_bit_agreement_counts_against_the_ground_truth(tiny_dataset, spec):
+    env = classifier.ClassifierBits(make_env(tiny_dataset), FakeClassifier())
+    try:
+        score = classifier.BitAgreement()
+        result = evaluate.run_episode(env, agents.RandomAgent(0), spec, 6, observer=score)
+        summary = score.summary()
+        assert summary["steps"] == result["steps"] == 6
+        truth_on = score.tp + score.fn
+        kitchen = rooms.room_index("kitchen")
+        assert score.tp[kitchen] + score.fp[kitchen] == 4  # the fake's kitchen bit is on from step 3 of 7
+        assert np.all(score.fp[np.arange(8) != kitchen] == 0) and np.all(score.tp[np.arange(8) != kitchen] == 0)
+        assert summary["types"]["kitchen"]["truth_steps"] == truth_on[kitchen]
+        assert 0.0 <= summary["exact"] <= 1.0
+    finally:
+        env.close()
