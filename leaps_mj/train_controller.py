@@ -17,7 +17,7 @@ clipped at ``max_grad_norm``).
 Sub-policies (``--subpolicy``): ``learned`` = ``leaps_mj.policies.load_default()``
 (then the environment renders at their resolution), ``local`` =
 :class:`leaps_mj.agents.LocalExpertPolicy`, ``auto`` = learned when the
-shipped checkpoints are there, else local. The choice is stored in the
+shipped checkpoints load, else local. The choice is stored in the
 checkpoint.
 
 Files under ``DIR``: ``controller.pt`` (latest weights, loadable by
@@ -132,14 +132,19 @@ PRESETS = {
 
 
 def resolve_subpolicy(choice: str) -> str:
-    """"auto" -> "learned" when the shipped sub-policy checkpoints exist, else "local"."""
+    """"auto" -> "learned" when the shipped sub-policies load, else "local" (saying why on stderr)."""
     if choice not in SUBPOLICIES:
         raise ValueError(f"subpolicy {choice!r}: expected one of {list(SUBPOLICIES)}")
     if choice != "auto":
         return choice
     from leaps_mj import policies
 
-    return "learned" if all((policies.DEFAULT_DIR / f"{t}.pt").is_file() for t in rooms.ROOM_TYPES) else "local"
+    try:
+        policies.load_default()
+    except ValueError as e:
+        print(f"controller: using the local-expert sub-policy ({e})", file=sys.stderr)
+        return "local"
+    return "learned"
 
 
 def make_subpolicy(kind: str, env, seed: int):
