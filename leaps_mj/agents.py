@@ -37,7 +37,7 @@ DEFAULT_PRIOR = "cpu"
 #: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.semantic.SemanticModel`).
 RULES = ("paper", "release")
 #: Agent names accepted by :func:`make_agent`.
-AGENT_NAMES = ("random", "pure", "leaps", "oracle")
+AGENT_NAMES = ("random", "pure", "leaps", "oracle", "controller")
 #: Steps after which the local expert gives up on an exploration goal.
 EXPLORE_PATIENCE = 40
 #: How far inside a room (metres) the local expert walks before choosing its next room.
@@ -523,6 +523,10 @@ def make_agent(name: str, env, subpolicy: SubPolicy | None = None, seed: int = 0
     sub = subpolicy if subpolicy is not None else LocalExpertPolicy(env, seed)
     if name == "pure":
         return PureAgent(sub)
+    if name == "controller":
+        from leaps_mj import baselines
+
+        return baselines.ControllerAgent.from_checkpoint(sub, seed=seed)
     if "model" in kwargs and "prior" in kwargs:
         raise ValueError("give the LEAPS agent either model or prior, not both")
     model = kwargs.pop("model", None) or load_model(kwargs.pop("prior", DEFAULT_PRIOR))

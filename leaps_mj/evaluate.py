@@ -64,12 +64,15 @@ class AgentSpec:
       rule: LEAPS observation rule ("paper" or "release").
       psi_obs: LEAPS observation noise (psi_obs0, psi_obs1) overriding the
         prior file's, or None.
+      bits: where the semantic bits come from: "truth" (the house geometry)
+        or "classifier" (the CNN room-type classifier, leaps_mj.classifier).
     """
 
     label: str
     name: str
     rule: str = "paper"
     psi_obs: tuple[float, float] | None = None
+    bits: str = "truth"
 
 
 #: Agents selectable with ``--agent``.
@@ -78,10 +81,12 @@ AGENTS = {
     "pure": AgentSpec("pure", "pure"),
     "leaps": AgentSpec("leaps", "leaps", rule="paper"),
     "leaps-release": AgentSpec("leaps-release", "leaps", rule="release"),
+    "leaps-cnn": AgentSpec("leaps-cnn", "leaps", rule="paper", bits="classifier"),
+    "controller": AgentSpec("controller", "controller"),
     "oracle": AgentSpec("oracle", "oracle"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.
-BASELINES = ("random", "pure")
+BASELINES = ("random", "pure", "controller")
 #: Named episode subsets: episodes per plan length (None: all).
 SUBSETS = {"full": None, "quick": 40, "smoke": 2}
 #: Most geodesic-distance bins of the success-vs-metres plot (about 10+ episodes each).
@@ -260,6 +265,12 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     """Runs one agent on a chunk of episode indices, in a worker."""
     spec, indices = job
     config, env, specs = _WORKER["config"], _WORKER["env"], _WORKER["specs"]
+    if spec.bits == "classifier":
+        if "classifier_env" not in _WORKER:
+            from leaps_mj import classifier
+
+            _WORKER["classifier_env"] = classifier.ClassifierBits(env)
+        env = _WORKER["classifier_env"]
     rows = []
     for i in indices:
         agent = _build_agent(spec, episode_seed(config.seed, i))
@@ -377,6 +388,8 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
         if pool is not None:
             pool.terminate()
             pool.join()
+        elif "env" in _WORKER:
+            _WORKER.pop("env").close()  # frees its GL context before interpreter exit
     table = {}
     for label in labels:
         rows = [r for r in read_rows(csv_path(out, label)) if r["episode"] in selected]

@@ -57,11 +57,6 @@ class SegDepthRenderer:
 
     def __init__(self, model: mujoco.MjModel, width: int, height: int, camera: str = "agent/eye",
                  context: "mujoco.GLContext | None" = None):
-        if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
-            raise ValueError(
-                f"resolution {width}x{height} exceeds the model's off-screen buffer "
-                f"{model.vis.global_.offwidth}x{model.vis.global_.offheight}"
-            )
         self.model = model
         self.width, self.height = width, height
         # No multisampling: it would blend segment colours at edges (and costs
@@ -69,6 +64,11 @@ class SegDepthRenderer:
         model.vis.quality.offsamples = 0
         model.vis.quality.numslices = 10
         model.vis.quality.numstacks = 4
+        # Nothing casts shadows: without this MuJoCo allocates a 4096² shadow
+        # map per context (64 MB per cached house); the offscreen buffer
+        # only needs this renderer's size.
+        model.vis.quality.shadowsize = 0
+        model.vis.global_.offwidth, model.vis.global_.offheight = width, height
         self._owns_ctx = context is None
         self._ctx = make_context(width, height) if context is None else context
         self._ctx.make_current()
