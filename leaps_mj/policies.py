@@ -1,9 +1,10 @@
 """Learned sub-policies μ(θ): per-target actor-critics behind the SubPolicy interface.
 
-A sub-policy has ``reset(target)`` (a new run towards a room type; resets the
-LSTM state) and ``act(timestep) -> int``. :class:`LearnedSubPolicy` holds one
-network per target room type, loaded from ``<folder>/<target>.pt`` as written
-by ``python -m leaps_mj.train policy``. :func:`load_default` loads the
+A sub-policy has ``reset(target)`` (a new run towards a room type, or the
+untyped ``indoor`` node; resets the LSTM state) and ``act(timestep) -> int``.
+:class:`LearnedSubPolicy` holds one network per target, loaded from
+``<folder>/<target>.pt`` as written by ``python -m leaps_mj.train policy``.
+:func:`load_default` loads the
 checkpoints shipped with the package (the ``cpu`` preset, 40x30 frames); they
 act on 40x30 environments or on frames of an integer multiple of that size
 (120x90), which they subsample.
@@ -32,7 +33,7 @@ class LearnedSubPolicy:
 
     Args:
       folder: Folder with one ``<target>.pt`` checkpoint per target.
-      targets: Room types to load (default: all 8).
+      targets: Targets to load (default: the 8 room types and ``indoor``).
       greedy: Take the most likely action instead of sampling one.
       seed: Seed of the action sampling.
       width, height: If given, the resolution the checkpoints must have.
@@ -47,7 +48,7 @@ class LearnedSubPolicy:
         resolution than asked, or the checkpoints disagree on resolution.
     """
 
-    def __init__(self, folder: str | os.PathLike, targets: Sequence[str] = rooms.ROOM_TYPES,
+    def __init__(self, folder: str | os.PathLike, targets: Sequence[str] = rooms.GRAPH_NODES,
                  greedy: bool = False, seed: int = 0, width: int | None = None, height: int | None = None):
         folder = pathlib.Path(folder)
         if not targets:
@@ -113,12 +114,12 @@ class LearnedSubPolicy:
 
 
 def load_default(greedy: bool = False, seed: int = 0) -> LearnedSubPolicy:
-    """The shipped sub-policies (cpu preset, 40x30) for all 8 targets.
+    """The shipped sub-policies (cpu preset, 40x30) for the 8 room types and ``indoor``.
 
     Raises:
       ValueError: if a shipped checkpoint is missing, naming the command that trains them.
     """
-    missing = [t for t in rooms.ROOM_TYPES if not (DEFAULT_DIR / f"{t}.pt").is_file()]
+    missing = [t for t in rooms.GRAPH_NODES if not (DEFAULT_DIR / f"{t}.pt").is_file()]
     if missing:
         raise ValueError(f"no shipped sub-policy checkpoints for {missing} in {DEFAULT_DIR}; "
                          f"train them with `{TRAIN_COMMAND}`")

@@ -2,7 +2,8 @@
 
 ``python -m leaps_mj.train policy --target kitchen|...|all --preset tiny|cpu|paper --out DIR``
 
-One :class:`~leaps_mj.nets.ActorCritic` per target room type, on
+One :class:`~leaps_mj.nets.ActorCritic` per target — the 8 room types and
+the untyped ``indoor`` node (hallways, for LEAPS's hallway hops) — on
 segmentation + depth frames. Three methods:
 
 * ``a2c`` — the paper's synchronous advantage actor-critic: ``t_max``-step
@@ -214,7 +215,7 @@ PRESETS = {
         method="dagger+a2c", total_steps=96, num_envs=2, t_max=8, replay=1, buffer_steps=64,
         horizon=20, start_distance=3.0, curriculum_iterations=2, checkpoint_every=2,
         eval_episodes=2, eval_horizon=10),
-    # All 8 targets in about an hour on 2 shared CPU cores: 40x30 frames, a
+    # All 9 targets in about 50 minutes on 2 shared CPU cores: 40x30 frames, a
     # narrow net, 32 houses with the target (4 per worker), DAgger only.
     "cpu": TrainConfig(
         num_houses=32, width=40, height=30, conv_channels=(16, 32, 32, 32), hidden=128, lstm=64,
@@ -835,7 +836,7 @@ def plot_curves(out: str | os.PathLike, targets: Sequence[str], path: str | os.P
 
     from leaps_mj import topdown
 
-    cols = min(4, len(targets))
+    cols = min(3 if len(targets) == 9 else 4, len(targets))
     rows_ = math.ceil(len(targets) / cols)
     fig, axes = plt.subplots(rows_, cols, figsize=(4.2 * cols, 3.2 * rows_), squeeze=False)
     for ax, target in zip(axes.flat, targets):
@@ -942,7 +943,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m leaps_mj.train policy", description=__doc__.split("\n\n")[0],
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu", help="base configuration")
-    parser.add_argument("--target", default="all", help=f"one of {list(rooms.ROOM_TYPES)} or 'all'")
+    parser.add_argument("--target", default="all", help=f"one of {list(rooms.GRAPH_NODES)} or 'all'")
     parser.add_argument("--out", default="runs/policy", help="output folder (resumed if it holds a run)")
     parser.add_argument("--device", default="cpu", help="torch device of the network (cpu, cuda)")
     parser.add_argument("--threads", type=int, default=1,
@@ -965,11 +966,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                  if getattr(args, f.name) is not None}
     config = dataclasses.replace(PRESETS[args.preset], **overrides)
     if args.target == "all":
-        targets = rooms.ROOM_TYPES
-    elif args.target in rooms.ROOM_TYPES:
+        targets = rooms.GRAPH_NODES
+    elif args.target in rooms.GRAPH_NODES:
         targets = (args.target,)
     else:
-        raise ValueError(f"target {args.target!r}: expected one of {list(rooms.ROOM_TYPES)} or 'all'")
+        raise ValueError(f"target {args.target!r}: expected one of {list(rooms.GRAPH_NODES)} or 'all'")
     if args.stop_after is not None and args.stop_after < 1:
         raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")
     if args.threads < 1:

@@ -115,7 +115,7 @@ def test_load_default_names_the_training_command_when_missing(monkeypatch, tmp_p
 
 def test_load_default_loads_the_shipped_policies(tiny_dataset):
     policy = policies.load_default(seed=0)
-    assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.ROOM_TYPES
+    assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.GRAPH_NODES
     assert all(meta["iteration"] == 450 and meta["eval"] for meta in policy.metadata.values())
     env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=5)  # 3x: subsampled
     try:
