@@ -35,7 +35,8 @@ Files under ``--out DIR`` per target::
 
 and ``training_curves.png`` once every target of the run is done. Re-running
 the same command resumes from ``state.pt`` (after a kill, too) and refuses a
-different configuration.
+different configuration; the DAgger replay buffer is not checkpointed (it
+refills within ``buffer_steps`` samples).
 """
 
 from __future__ import annotations
@@ -243,7 +244,10 @@ class TrainingEnv:
     It also applies the distance curriculum: each new episode's start is
     bounded by ``config.start_distance_at(iteration)``, where the iteration is
     counted from the worker's own steps (every worker steps ``t_max`` times
-    per iteration), so no extra command is needed.
+    per iteration), so no extra command is needed. The bound is set by
+    replacing the environment's ``config`` (``sample_episode`` reads
+    ``max_start_distance`` from it), and the timings wrap the task's
+    ``before_step`` / ``after_step`` on this instance.
 
     Args:
       env: The environment (from :func:`leaps_mj.load`).
@@ -311,7 +315,12 @@ class TrainingEnv:
 
 
 def _training_worker(conn, env_kwargs, seed, wrapper_args):
-    """:func:`leaps_mj.vector._worker` serving a :class:`TrainingEnv`."""
+    """:func:`leaps_mj.vector._worker` serving a :class:`TrainingEnv`.
+
+    ``VectorEnv`` has no hook to wrap its workers' environments, so this
+    worker process (only) builds its environment through a ``leaps_mj.load``
+    that wraps, and reuses the worker loop unchanged.
+    """
     make = leaps_mj.load
     leaps_mj.load = lambda **kwargs: TrainingEnv(make(**kwargs), *wrapper_args)
     vector._worker(conn, env_kwargs, seed)
@@ -321,7 +330,7 @@ class TrainingVectorEnv(vector.VectorEnv):
     """A :class:`leaps_mj.vector.VectorEnv` whose workers serve :class:`TrainingEnv`.
 
     Each worker gets its own environment arguments (its shard of the training
-    houses: a worker keeps every house it visits compiled, about 70 MB each).
+    houses: a worker keeps every house it visits compiled).
 
     Args:
       worker_kwargs: One dict of :func:`leaps_mj.load` arguments per worker.
