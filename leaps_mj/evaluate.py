@@ -25,9 +25,8 @@ Outputs in ``--out``:
 * ``success_vs_plan_length.png``, ``success_vs_metres.png``,
   ``relative_improvement.png``: the paper's Fig. 4-style plots.
 
-``--subset quick`` (40 episodes per plan length, 200 on roomnav-v1's test
-split; random, pure and LEAPS take about 6 minutes on one core) is the fixed
-subset for a short run; ``--subset smoke`` (2 per plan length) checks the
+``--subset quick`` (20 episodes per plan length, 100 on roomnav-v1's test
+split: the README's main job) is the fixed subset for a short run; ``--subset smoke`` (2 per plan length) checks the
 pipeline in seconds.
 """
 
@@ -88,7 +87,7 @@ AGENTS = {
 #: Baselines LEAPS is compared with in the relative-improvement plot.
 BASELINES = ("random", "pure", "controller")
 #: Named episode subsets: episodes per plan length (None: all).
-SUBSETS = {"full": None, "quick": 40, "smoke": 2}
+SUBSETS = {"full": None, "quick": 20, "smoke": 2}
 #: Most geodesic-distance bins of the success-vs-metres plot (about 10+ episodes each).
 MAX_METRE_BINS = 8
 CSV_FIELDS = ("episode", "house", "target", "plan_length", "geodesic", "success_step", "steps",

@@ -45,6 +45,7 @@ import argparse
 import collections
 import csv
 import dataclasses
+import functools
 import io
 import math
 import os
@@ -314,49 +315,27 @@ class TrainingEnv:
         self._env.close()
 
 
-def _training_worker(conn, env_kwargs, seed, wrapper_args):
-    """:func:`leaps_mj.vector._worker` serving a :class:`TrainingEnv`.
-
-    ``VectorEnv`` has no hook to wrap its workers' environments, so this
-    worker process (only) builds its environment through a ``leaps_mj.load``
-    that wraps, and reuses the worker loop unchanged.
-    """
-    make = leaps_mj.load
-    leaps_mj.load = lambda **kwargs: TrainingEnv(make(**kwargs), *wrapper_args)
-    vector._worker(conn, env_kwargs, seed)
+def make_training_env(seed: int, config: TrainConfig, first_iteration: int, label: bool,
+                      **env_kwargs) -> TrainingEnv:
+    """A worker's :class:`TrainingEnv` (the ``make_env`` of :class:`leaps_mj.vector.VectorEnv`)."""
+    return TrainingEnv(leaps_mj.load(seed=seed, **env_kwargs), config, first_iteration, seed, label)
 
 
-class TrainingVectorEnv(vector.VectorEnv):
-    """A :class:`leaps_mj.vector.VectorEnv` whose workers serve :class:`TrainingEnv`.
-
-    Each worker gets its own environment arguments (its shard of the training
-    houses: a worker keeps every house it visits compiled).
+def training_vector_env(worker_kwargs: Sequence[dict], seed: int, config: TrainConfig, first_iteration: int,
+                        label: bool) -> vector.VectorEnv:
+    """Worker processes serving :class:`TrainingEnv`, each with its own arguments.
 
     Args:
-      worker_kwargs: One dict of :func:`leaps_mj.load` arguments per worker.
+      worker_kwargs: One dict of :func:`leaps_mj.load` arguments per worker
+        (its shard of the training houses: a worker keeps every house it
+        visits compiled).
       seed: Worker ``i`` gets seed ``seed + i`` (environment and expert).
       config: The run's :class:`TrainConfig`.
       first_iteration: Iteration at which training (re)starts (curriculum).
       label: Whether workers compute expert labels.
     """
-
-    def __init__(self, worker_kwargs: Sequence[dict], seed: int, config: TrainConfig, first_iteration: int,
-                 label: bool):
-        import multiprocessing as mp
-
-        ctx = mp.get_context("spawn")
-        self._conns, self._procs = [], []
-        for i, env_kwargs in enumerate(worker_kwargs):
-            parent, child = ctx.Pipe()
-            args = (child, env_kwargs, seed + i, (config, first_iteration, seed + i, label))
-            p = ctx.Process(target=_training_worker, args=args, daemon=True)
-            p.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(p)
-        self.num_envs = len(worker_kwargs)
-        self._closed = False
-        self._obs_spec, self._act_spec = self._call(0, "specs")
+    make_env = functools.partial(make_training_env, config=config, first_iteration=first_iteration, label=label)
+    return vector.VectorEnv(len(worker_kwargs), seed, make_env=make_env, worker_kwargs=list(worker_kwargs))
 
 
 # -- returns and losses ---------------------------------------------------------------------------
@@ -577,7 +556,7 @@ class Trainer:
         last = min(last, c.iterations)
         bar = tqdm.tqdm(total=c.iterations * c.batch, initial=self.global_step, unit="step",
                         desc=f"{self.target} {c.method}", disable=not self.progress, dynamic_ncols=True)
-        with TrainingVectorEnv(self._worker_kwargs(), seed, c, self.iteration, label) as envs:
+        with training_vector_env(self._worker_kwargs(), seed, c, self.iteration, label) as envs:
             timesteps = envs.reset()
             state = self.model.initial_state(c.num_envs, self.device)
             stats = EpisodeStats(c.num_envs)

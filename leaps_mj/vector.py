@@ -18,10 +18,12 @@ import traceback
 import numpy as np
 
 
-def _worker(conn, env_kwargs, seed):
-    import leaps_mj
+def _worker(conn, make_env, env_kwargs, seed):
+    if make_env is None:
+        import leaps_mj
 
-    env = leaps_mj.load(seed=seed, **env_kwargs)
+        make_env = leaps_mj.load
+    env = make_env(seed=seed, **env_kwargs)
     try:
         while True:
             cmd, arg = conn.recv()
@@ -58,17 +60,26 @@ class VectorEnv:
       num_envs: number of worker processes.
       seed: worker ``i`` gets seed ``seed + i``.
       start_method: multiprocessing start method ("spawn" is safe with GL).
-      **env_kwargs: passed to :func:`leaps_mj.load` (dataset, split, config).
+      make_env: picklable callable ``(seed=..., **kwargs) -> environment``
+        building each worker's environment (e.g. a wrapper around
+        :func:`leaps_mj.load`); None means :func:`leaps_mj.load`.
+      worker_kwargs: optional list of ``num_envs`` dicts, worker ``i``'s own
+        arguments (e.g. a shard of the houses), merged over ``env_kwargs``.
+      **env_kwargs: passed to ``make_env`` (dataset, split, config).
     """
 
-    def __init__(self, num_envs: int, seed: int = 0, start_method: str = "spawn", **env_kwargs):
+    def __init__(self, num_envs: int, seed: int = 0, start_method: str = "spawn", make_env=None,
+                 worker_kwargs=None, **env_kwargs):
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs {num_envs!r}: expected a positive integer")
+        if worker_kwargs is not None and len(worker_kwargs) != num_envs:
+            raise ValueError(f"worker_kwargs has {len(worker_kwargs)} entries for {num_envs} workers")
         ctx = mp.get_context(start_method)
         self._conns, self._procs = [], []
         for i in range(num_envs):
             parent, child = ctx.Pipe()
-            p = ctx.Process(target=_worker, args=(child, env_kwargs, seed + i), daemon=True)
+            kwargs = {**env_kwargs, **(worker_kwargs[i] if worker_kwargs is not None else {})}
+            p = ctx.Process(target=_worker, args=(child, make_env, kwargs, seed + i), daemon=True)
             p.start()
             child.close()
             self._conns.append(parent)
