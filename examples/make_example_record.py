@@ -8,7 +8,7 @@ replanned), at most ``--max-steps`` steps (a small file). Writes
 * ``examples/leaps_episode.mcap``: the record (open it in Foxglove), and
 * ``docs/img/record_preview.png``: top-down trajectory + first-person views.
 
-    python examples/make_example_record.py [--dataset roomnav-v1] [--prior reference]
+    python examples/make_example_record.py [--dataset roomnav-v1] [--prior cpu]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--dataset", default="roomnav-v1")
     p.add_argument("--split", default="test")
-    p.add_argument("--prior", default="reference", help="LEAPS prior (see leaps_mj.agents.load_model)")
+    p.add_argument("--prior", default="cpu", help="LEAPS prior (see leaps_mj.agents.load_model)")
     p.add_argument("--min-plan-length", type=int, default=3)
     p.add_argument("--min-subtargets", type=int, default=3)
     p.add_argument("--max-steps", type=int, default=200)
