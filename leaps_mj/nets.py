@@ -24,6 +24,7 @@ producing silent garbage.
 """
 
 import dataclasses
+import json
 import math
 import os
 import pathlib
@@ -558,6 +559,27 @@ def save_checkpoint(
     except BaseException:
         os.unlink(tmp)
         raise
+
+
+def check_same_config(path, saved: Mapping, config) -> None:
+    """Refuses to resume a training run under another configuration.
+
+    Args:
+      path: the checkpoint being resumed (named in the error).
+      saved: the configuration stored in it (a dict).
+      config: the configuration dataclass given now.
+
+    Raises:
+      ValueError: naming every differing field with its saved and given value.
+    """
+    # Compare as JSON values: a tuple saved by one route may come back as a list.
+    saved = json.loads(json.dumps(dict(saved)))
+    given = json.loads(json.dumps(dataclasses.asdict(config)))
+    diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
+    if diff:
+        fields = ", ".join(f"{k}: saved {a!r}, given {b!r}" for k, (a, b) in diff.items())
+        raise ValueError(f"{path} holds a run with another configuration ({fields}); "
+                         "rerun with the same options or another --out")
 
 
 def load_policy(

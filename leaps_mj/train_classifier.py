@@ -267,11 +267,7 @@ class Trainer:
 
     def _resume(self) -> None:
         model, _, extra = nets.load_policy(self.state_path)
-        saved, given = extra["train_config"], json.loads(json.dumps(dataclasses.asdict(self.config)))
-        diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
-        if diff:
-            raise ValueError(f"{self.state_path} holds a run with another configuration (saved, given): {diff}; "
-                             "rerun with the same options or another --out")
+        nets.check_same_config(self.state_path, extra["train_config"], self.config)
         self.model.load_state_dict(model.state_dict())
         self.optimizer.load_state_dict(extra["optimizer"])
         self.epoch, self.best, self.history = extra["epoch"], extra["best"], extra["history"]

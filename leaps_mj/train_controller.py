@@ -237,11 +237,7 @@ class Trainer:
 
     def _resume(self) -> None:
         net, _, extra = nets.load_policy(self.state_path)
-        saved, given = extra["train_config"], dataclasses.asdict(self.config)
-        diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
-        if diff:
-            raise ValueError(f"{self.state_path} holds a run with another configuration (saved, given): {diff}; "
-                             "rerun with the same options or another --out")
+        nets.check_same_config(self.state_path, extra["train_config"], self.config)
         self.net.load_state_dict(net.state_dict())
         self.optimizer.load_state_dict(extra["optimizer"])
         self.update, self.history, self.eval = extra["update"], extra["history"], extra["eval"]

@@ -499,13 +499,10 @@ class Trainer:
     # -- checkpoints -----------------------------------------------------------------------
     def _resume(self) -> None:
         model, _, extra = nets.load_policy(self.state_path, self.config.width, self.config.height)
-        saved = extra["train_config"]
-        given = dataclasses.asdict(self.config)
-        diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
-        if diff or extra["target"] != self.target:
-            fields = ", ".join(f"{k}: saved {a!r}, given {b!r}" for k, (a, b) in diff.items())
-            raise ValueError(f"{self.state_path} holds a run with another configuration ({fields or 'target'}); "
-                             "rerun with the same options or another --out")
+        if extra["target"] != self.target:
+            raise ValueError(f"{self.state_path} holds a run for target {extra['target']!r}, not {self.target!r}; "
+                             "use another --out")
+        nets.check_same_config(self.state_path, extra["train_config"], self.config)
         self.model.load_state_dict(model.state_dict())
         self.optimizer.load_state_dict(extra["optimizer"])
         self.iteration, self.global_step = extra["iteration"], extra["global_step"]
