@@ -213,10 +213,21 @@ def select_episodes(specs, per_length: int | None = None, limit: int | None = No
 _WORKER: dict = {}
 
 
-def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, record=None) -> None:
+def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, record=None,
+                 torch_threads: int | None = None) -> None:
     """Per-process state: the environment, the episodes, the LEAPS model, the learned sub-policy,
-    and where to record episodes (``(folder, mode)`` or None)."""
+    and where to record episodes (``(folder, mode)`` or None).
+
+    Pool workers run with one torch thread (``torch_threads=1``): several
+    processes each spinning two OpenMP threads on two cores made the learned
+    sub-policies' convolutions about ten times slower.
+    """
     import leaps_mj
+
+    if torch_threads is not None and config.subpolicy == "learned":
+        import torch
+
+        torch.set_num_threads(torch_threads)
 
     _WORKER.clear()
     _WORKER["config"] = config
@@ -370,7 +381,7 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
     total = sum(len(j[1]) for j in jobs)
     if workers > 1 and len(jobs) > 1:
         pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)), _init_worker,
-                                                         (config, model, record))
+                                                         (config, model, record, 1))
         results = pool.imap_unordered(_run_chunk, jobs)
     else:
         pool = None
