@@ -255,7 +255,10 @@ def _build_agent(spec: AgentSpec, seed: int):
         if spec.psi_obs is not None:
             model = semantic.SemanticModel(model.prior, *spec.psi_obs)
         kwargs = {"model": model, "rule": spec.rule, "replan_every": config.replan_every}
-    return agents_lib.make_agent(spec.name, env, subpolicy=_WORKER["subpolicy"], seed=seed, **kwargs)
+    subpolicy = _WORKER["subpolicy"]
+    if subpolicy is not None:
+        subpolicy.seed(seed)  # the episode's own sampling stream, whatever ran before
+    return agents_lib.make_agent(spec.name, env, subpolicy=subpolicy, seed=seed, **kwargs)
 
 
 def _observer(label: str):

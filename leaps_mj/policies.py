@@ -70,6 +70,11 @@ class LearnedSubPolicy:
         self._net: nets.ActorCritic | None = None
         self._state = None
 
+    def seed(self, seed: int) -> None:
+        """Restarts the action sampler from ``seed`` (e.g. per evaluated episode, so
+        results do not depend on which episodes a process ran before)."""
+        self._generator.manual_seed(seed)
+
     def reset(self, target: str) -> None:
         """Starts a run towards ``target``: switches network, zeroes the LSTM state.
 

@@ -124,3 +124,15 @@ def test_load_default_loads_the_shipped_policies(tiny_dataset):
     finally:
         env.close()
     assert all(0 <= a < rooms.NUM_ACTIONS for a in actions)
+
+
+def test_seed_restarts_the_sampler():
+    import torch
+
+    from leaps_mj import policies
+
+    sub = policies.load_default()
+    sub.seed(5)
+    a = torch.rand(3, generator=sub._generator)
+    sub.seed(5)
+    assert torch.equal(a, torch.rand(3, generator=sub._generator))
