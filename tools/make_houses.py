@@ -20,24 +20,23 @@ import leaps_mj  # noqa: E402,F401  (sets MUJOCO_GL before anything imports dm_c
 from leaps_mj import dataset  # noqa: E402
 
 
-def _count(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer, got {n}")
-    return n
+def _int_at_least(minimum: int, what: str):
+    """An argparse type: an integer >= ``minimum``, with an error naming the value."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {what} integer, got {text!r}") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"expected a {what} integer, got {n}")
+        return n
+
+    return parse
 
 
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
-    return n
+_count = _int_at_least(0, "non-negative")
+_positive = _int_at_least(1, "positive")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
