@@ -439,7 +439,7 @@ class RoomNav(base.Task):
             return 10.0
         r = 0.0
         delta = self.prev_distance - self.distance
-        r += float(np.clip(delta, -0.5, 0.5))
+        r += min(max(delta, -0.5), 0.5)
         if delta <= 1e-6:
             r -= 0.1
         if self.was_in_target and not self.in_target:

@@ -11,6 +11,7 @@ radius can actually travel.
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 import scipy.ndimage
@@ -84,9 +85,13 @@ class NavGrid:
         return np.broadcast_to(xs, self.shape), np.broadcast_to(ys, self.shape)
 
     def to_cell(self, xy) -> tuple[int, int]:
-        """Grid index of a world point (clipped to the grid)."""
-        ij = np.floor((np.asarray(xy[:2], dtype=float) - self.origin) / self.cell).astype(int)
-        return int(np.clip(ij[0], 0, self.shape[0] - 1)), int(np.clip(ij[1], 0, self.shape[1] - 1))
+        """Grid index of a world point (clipped to the grid).
+
+        Plain float arithmetic: this runs several times per environment step.
+        """
+        i = math.floor((float(xy[0]) - self.origin[0]) / self.cell)
+        j = math.floor((float(xy[1]) - self.origin[1]) / self.cell)
+        return min(max(i, 0), self.shape[0] - 1), min(max(j, 0), self.shape[1] - 1)
 
     def to_world(self, ij) -> np.ndarray:
         """World (x, y) of a cell centre."""
