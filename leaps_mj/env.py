@@ -34,7 +34,6 @@ import json
 import math
 import pathlib
 
-import dm_env
 import mujoco
 import numpy as np
 import scipy.ndimage

@@ -211,7 +211,7 @@ class House:
             if self.rooms[a].type != self.rooms[b].type
         }
 
-    def obstacles(self, agent_height: float = 1.5) -> list[tuple[float, float, float, float]]:
+    def obstacles(self) -> list[tuple[float, float, float, float]]:
         """Floor rectangles the agent cannot enter: walls and furniture."""
         rects = [w.rect for w in self.walls]
         rects += [it.footprint for it in self.items if it.footprint is not None]
