@@ -37,7 +37,7 @@ DEFAULT_PRIOR = "cpu"
 #: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.semantic.SemanticModel`).
 RULES = ("paper", "release")
 #: Agent names accepted by :func:`make_agent`.
-AGENT_NAMES = ("random", "pure", "leaps", "oracle", "controller")
+AGENT_NAMES = ("random", "pure", "leaps", "oracle", "controller", "aug")
 #: Steps after which the local expert gives up on an exploration goal.
 EXPLORE_PATIENCE = 40
 #: How far inside a room (metres) the local expert walks before choosing its next room.
@@ -499,10 +499,12 @@ def make_agent(name: str, env, subpolicy: SubPolicy | None = None, seed: int = 0
     """Builds an agent by name.
 
     Args:
-      name: "random", "pure", "leaps" or "oracle".
+      name: one of :data:`AGENT_NAMES`.
       env: the environment (for agents and sub-policies reading privileged state).
-      subpolicy: the sub-policy of "pure" and "leaps" (any :class:`SubPolicy`,
-        e.g. the learned ones); default a :class:`LocalExpertPolicy`.
+      subpolicy: the sub-policy of "pure", "leaps" and "controller" (any
+        :class:`SubPolicy`, e.g. the learned ones; default a
+        :class:`LocalExpertPolicy`), or μ_s for "aug" (required:
+        ``leaps_mj.policies.load_augmented()``).
       seed: seed of the agent's (and default sub-policy's) random draws.
       **kwargs: for "leaps": ``model`` (a SemanticModel) or ``prior`` (see
         :func:`load_model`), ``replan_every``, ``rule``.
@@ -520,6 +522,13 @@ def make_agent(name: str, env, subpolicy: SubPolicy | None = None, seed: int = 0
         return RandomAgent(seed)
     if name == "oracle":
         return OracleAgent(env, seed)
+    if name == "aug":
+        from leaps_mj import baselines
+
+        if subpolicy is None:
+            raise ValueError("agent 'aug' needs its semantic-augmented policy μ_s as subpolicy "
+                             "(leaps_mj.policies.load_augmented())")
+        return baselines.AugmentedPolicyAgent(subpolicy)
     sub = subpolicy if subpolicy is not None else LocalExpertPolicy(env, seed)
     if name == "pure":
         return PureAgent(sub)

@@ -190,8 +190,10 @@ class HouseModel:
         self.agent_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "agent/agent__shell")
         pad = rooms.WALL_THICKNESS / 2
         indoor = house.indoor_rooms
-        self._rects = np.array([r.rect for r in indoor]).reshape(-1, 4) + np.array([-pad, -pad, pad, pad])
-        self._room_types = np.array([rooms.room_index(r.type) for r in indoor], dtype=np.int64)
+        # (x0, y0, x1, y1, room-type index) per indoor room, widened by half a wall; plain
+        # tuples, as semantic_bits runs every step over a handful of rooms.
+        self._rects = tuple((r.rect[0] - pad, r.rect[1] - pad, r.rect[2] + pad, r.rect[3] + pad,
+                             rooms.room_index(r.type)) for r in indoor)
         self._has_yard = any(r.type == "outdoor" for r in house.rooms)
         self._distance_maps: dict[str, np.ndarray] = {}
 
@@ -202,11 +204,13 @@ class HouseModel:
         in untyped indoor space all bits are zero; in the yard, outdoor.
         """
         bits = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.uint8)
-        r = self._rects
-        inside = (r[:, 0] <= x) & (x <= r[:, 2]) & (r[:, 1] <= y) & (y <= r[:, 3])
-        types = self._room_types[inside]
-        bits[types[types < rooms.NUM_ROOM_TYPES]] = 1
-        if not inside.any() and self._has_yard:
+        indoors = False
+        for x0, y0, x1, y1, kind in self._rects:
+            if x0 <= x <= x1 and y0 <= y <= y1:
+                indoors = True
+                if kind < rooms.NUM_ROOM_TYPES:
+                    bits[kind] = 1
+        if not indoors and self._has_yard:
             bits[rooms.room_index("outdoor")] = 1
         return bits
 
@@ -270,33 +274,39 @@ class Physics(dm_mujoco.Physics):
     the physics only updates kinematics, cameras and contacts.
     """
 
+    def _reload_from_data(self, data) -> None:
+        super()._reload_from_data(data)
+        # The raw mujoco structs: the per-step calls below skip dm_control's wrapper attribute lookups.
+        self._raw_model, self._raw_data = self.model.ptr, self.data.ptr
+
     def step(self, nstep: int = 1) -> None:
         del nstep
         self.forward_kinematics()
 
     def forward_kinematics(self) -> None:
-        mujoco.mj_kinematics(self.model.ptr, self.data.ptr)
-        mujoco.mj_camlight(self.model.ptr, self.data.ptr)
+        mujoco.mj_kinematics(self._raw_model, self._raw_data)
+        mujoco.mj_camlight(self._raw_model, self._raw_data)
 
     def agent_pose(self) -> np.ndarray:
         """(x, y, yaw) of the agent."""
-        return self.data.qpos[:3].copy()
+        return self._raw_data.qpos[:3].copy()
 
     def set_agent_pose(self, pose) -> None:
-        self.data.qpos[:3] = pose
+        self._raw_data.qpos[:3] = pose
         self.forward_kinematics()
 
     def agent_in_contact(self, agent_geom: int) -> bool:
         """Whether the agent's cylinder touches any scene geom at its pose."""
-        mujoco.mj_kinematics(self.model.ptr, self.data.ptr)
-        mujoco.mj_collision(self.model.ptr, self.data.ptr)
-        con = self.data.contact
-        n = self.data.ncon
-        return bool(n and np.any((con.geom1[:n] == agent_geom) | (con.geom2[:n] == agent_geom)))
+        m, d = self._raw_model, self._raw_data
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        return bool(d.ncon and (d.contact.geom == agent_geom).any())
 
 
 def _coerce_action(action) -> int:
     """The action as an int in [0, 9), or a ValueError naming what was given."""
+    if type(action) is int and 0 <= action < rooms.NUM_ACTIONS:  # the common case, checked cheaply
+        return action
     arr = np.asarray(action)
     if arr.shape != () or not (np.issubdtype(arr.dtype, np.integer)):
         raise ValueError(
@@ -347,6 +357,11 @@ class RoomNav(base.Task):
         spec = self.episode
         physics.set_agent_pose(spec.start)
         self.target_index = rooms.room_index(spec.target)
+        self.target_onehot = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.uint8)
+        if self.target_index < rooms.NUM_ROOM_TYPES:
+            self.target_onehot[self.target_index] = 1
+        # Segment index → whether its pixels count for seeing the target.
+        self._see_mask = self._env.segment_luts[1][self.target_index]
         self.collision = False
         self.steps = 0
         self.success_streak = 0
@@ -361,7 +376,7 @@ class RoomNav(base.Task):
     def before_step(self, action, physics):
         a = _coerce_action(action)
         _, fwd, left, yaw_deg = rooms.ACTIONS[a]
-        x, y, yaw = physics.agent_pose()
+        x, y, yaw = physics.agent_pose().tolist()
         yaw = math.remainder(yaw + math.radians(yaw_deg), 2 * math.pi)
         dist = math.hypot(fwd, left)
         self.collision = False
@@ -369,25 +384,26 @@ class RoomNav(base.Task):
             heading = yaw + math.atan2(left, fwd)
             n = max(1, math.ceil(dist / _SUBSTEP - 1e-9))
             ok = (x, y)
+            qpos, agent_geom = physics.data.ptr.qpos, self.house_model.agent_geom
             for k in range(1, n + 1):
                 cand = (x + math.cos(heading) * dist * k / n, y + math.sin(heading) * dist * k / n)
-                physics.data.qpos[:3] = (*cand, yaw)
-                if physics.agent_in_contact(self.house_model.agent_geom):
+                qpos[:3] = (*cand, yaw)
+                if physics.agent_in_contact(agent_geom):
                     self.collision = True
                     break
                 ok = cand
-            physics.data.qpos[:3] = (*ok, yaw)
+            qpos[:3] = (*ok, yaw)
         else:
-            physics.data.qpos[2] = yaw
+            physics.data.ptr.qpos[2] = yaw
 
     def after_step(self, physics):
         self.steps += 1
         self._render(physics)
         hm = self.house_model
-        pose = physics.agent_pose()
-        self.prev_distance, self.distance = self.distance, hm.geodesic(pose[:2], self.episode.target)
+        x, y, _ = physics.agent_pose().tolist()
+        self.prev_distance, self.distance = self.distance, hm.geodesic((x, y), self.episode.target)
         self.was_in_target = self.in_target
-        self.bits = hm.semantic_bits(*pose[:2])
+        self.bits = hm.semantic_bits(x, y)
         self.in_target = hm.in_node(self.bits, self.target_index)
         nothing_to_see = not rooms.SEE_OBJECTS.get(self.episode.target)
         sees = self.in_target and (nothing_to_see or self.target_fraction >= self.config.success_fraction)
@@ -403,22 +419,20 @@ class RoomNav(base.Task):
             return
         renderer = self._env.renderer
         seg, depth = renderer.render_segments(physics.data.ptr)
-        class_lut, see_lut = self._env.segment_luts
-        self.segmentation = class_lut[seg]
-        self.depth = np.minimum(depth, MAX_DEPTH).astype(np.float32)
-        counts = np.bincount(seg.ravel(), minlength=len(class_lut))
-        self.target_fraction = float(counts @ see_lut[self.target_index]) / seg.size
+        # ndarray.take: the fastest per-pixel table lookup for these sizes (fancy indexing and
+        # bincount cost several times more); seg indexes the tables, whose length is ngeom + 1.
+        self.segmentation = self._env.segment_luts[0].take(seg)
+        self.depth = np.minimum(depth, MAX_DEPTH, out=depth)
+        self.target_fraction = np.count_nonzero(self._see_mask.take(seg)) / seg.size
 
     def get_observation(self, physics):
         pose = physics.agent_pose()
-        target = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.uint8)
-        if self.target_index < rooms.NUM_ROOM_TYPES:
-            target[self.target_index] = 1
+        # Every frame is a fresh array (see _render), so it is handed out without a copy.
         obs = collections.OrderedDict(
-            segmentation=self.segmentation.copy(),
-            depth=self.depth.copy(),
+            segmentation=self.segmentation,
+            depth=self.depth,
             semantic=self.bits.copy(),
-            target=target,
+            target=self.target_onehot.copy(),
             collision=np.uint8(self.collision),
             pose=pose.astype(np.float32),
         )
@@ -525,7 +539,7 @@ class RoomNavEnvironment(control.Environment):
             self._task.house_model = hm
             # Segment index → class and → counts for "see", via the scene's geoms.
             geoms = rend.segment_geoms + 1
-            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms].astype(np.int64))
+            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms])
         return physics
 
     # -- episodes --------------------------------------------------------------

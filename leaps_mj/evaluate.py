@@ -25,6 +25,10 @@ Outputs in ``--out``:
 * ``success_vs_plan_length.png``, ``success_vs_metres.png``,
   ``relative_improvement.png``: the paper's Fig. 4-style plots.
 
+Agent ``aug`` (the semantic-augmented policy μ_s) always runs the shipped
+learned μ_s (``leaps_mj.policies.load_augmented()``), whatever
+``--subpolicy`` says; ``controller`` and ``leaps*`` use ``--subpolicy``.
+
 ``--subset quick`` (20 episodes per plan length, 100 on roomnav-v1's test
 split: the README's main job) is the fixed subset for a short run; ``--subset smoke`` (2 per plan length) checks the
 pipeline in seconds.
@@ -82,10 +86,11 @@ AGENTS = {
     "leaps-release": AgentSpec("leaps-release", "leaps", rule="release"),
     "leaps-cnn": AgentSpec("leaps-cnn", "leaps", rule="paper", bits="classifier"),
     "controller": AgentSpec("controller", "controller"),
+    "aug": AgentSpec("aug", "aug"),
     "oracle": AgentSpec("oracle", "oracle"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.
-BASELINES = ("random", "pure", "controller")
+BASELINES = ("random", "pure", "aug", "controller")
 #: Named episode subsets: episodes per plan length (None: all).
 SUBSETS = {"full": None, "quick": 20, "smoke": 2}
 #: Most geodesic-distance bins of the success-vs-metres plot (about 10+ episodes each).
@@ -224,7 +229,7 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, recor
     """
     import leaps_mj
 
-    if torch_threads is not None and config.subpolicy == "learned":
+    if torch_threads is not None:
         import torch
 
         torch.set_num_threads(torch_threads)
@@ -256,6 +261,12 @@ def _build_agent(spec: AgentSpec, seed: int):
             model = semantic.SemanticModel(model.prior, *spec.psi_obs)
         kwargs = {"model": model, "rule": spec.rule, "replan_every": config.replan_every}
     subpolicy = _WORKER["subpolicy"]
+    if spec.name == "aug":
+        if "augmented" not in _WORKER:
+            from leaps_mj import policies
+
+            _WORKER["augmented"] = policies.load_augmented()
+        subpolicy = _WORKER["augmented"]
     if subpolicy is not None:
         subpolicy.seed(seed)  # the episode's own sampling stream, whatever ran before
     return agents_lib.make_agent(spec.name, env, subpolicy=subpolicy, seed=seed, **kwargs)

@@ -2,6 +2,10 @@
 
 ``python -m leaps_mj.train policy --target kitchen|...|all --preset tiny|cpu|paper --out DIR``
 
+With ``--use-semantic true`` the same recipe trains the semantic-augmented
+policy μ_s of the paper's baselines: the network also reads the room-type
+bits and the target one-hot (``leaps_mj.policies.load_augmented``).
+
 One :class:`~leaps_mj.nets.ActorCritic` per target — the 8 room types and
 the untyped ``indoor`` node (hallways, for LEAPS's hallway hops) — on
 segmentation + depth frames. Three methods:
@@ -78,6 +82,8 @@ class TrainConfig:
       width, height: Frame resolution of the environment and the network.
       conv_channels, kernel, hidden, lstm, seg_embed: Network widths
         (:class:`leaps_mj.nets.PolicyConfig`).
+      use_semantic: Train the semantic-augmented policy μ_s: the network
+        also reads the room-type bits and the target one-hot.
       method: "a2c", "dagger" or "dagger+a2c".
       total_steps: Environment steps per target (all environments together).
       dagger_fraction: Share of the iterations spent on DAgger in "dagger+a2c".
@@ -122,6 +128,7 @@ class TrainConfig:
     hidden: int = 256
     lstm: int = 256
     seg_embed: int = 8
+    use_semantic: bool = False
     method: str = "a2c"
     total_steps: int = 20_000_000
     dagger_fraction: float = 0.7
@@ -179,7 +186,8 @@ class TrainConfig:
     def policy_config(self) -> nets.PolicyConfig:
         """The network architecture of this run."""
         return nets.PolicyConfig(width=self.width, height=self.height, conv_channels=self.conv_channels,
-                                 kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed)
+                                 kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed,
+                                 use_semantic=self.use_semantic)
 
     @property
     def batch(self) -> int:
@@ -425,9 +433,14 @@ class Unroll:
     valid: np.ndarray  # (T, B) float32, 0 at LAST observations (their action is ignored)
     labels: np.ndarray  # (T, B) int64 expert actions (-1: none)
     state: tuple[np.ndarray, np.ndarray]  # LSTM (h, c) at the unroll's start
+    semantic: np.ndarray | None = None  # (T, B, K) uint8 room-type bits (μ_s only)
+    target: np.ndarray | None = None  # (T, B, K) uint8 target one-hot (μ_s only)
 
     def tensors(self, device) -> tuple[dict, torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
-        obs = nets.ActorCritic.preprocess({"segmentation": self.segmentation, "depth": self.depth}, device)
+        arrays = {"segmentation": self.segmentation, "depth": self.depth}
+        if self.semantic is not None:
+            arrays.update(semantic=self.semantic, target=self.target)
+        obs = nets.ActorCritic.preprocess(arrays, device)
         first = torch.as_tensor(self.first, device=device)
         state = tuple(torch.as_tensor(s, device=device) for s in self.state)
         return obs, first, state
@@ -586,6 +599,8 @@ class Trainer:
         T, B = c.t_max, c.num_envs
         seg = np.zeros((T, B, c.height, c.width), np.uint8)
         depth = np.zeros((T, B, c.height, c.width), np.float16)
+        keys = ("segmentation", "depth") + (("semantic", "target") if c.use_semantic else ())
+        bits = {k: np.zeros((T, B, rooms.NUM_ROOM_TYPES), np.uint8) for k in keys[2:]}
         first, valid = np.zeros((T, B), np.float32), np.zeros((T, B), np.float32)
         labels, actions = np.zeros((T, B), np.int64), np.zeros((T, B), np.int64)
         rewards, discounts = np.zeros((T, B)), np.zeros((T, B))
@@ -593,7 +608,7 @@ class Trainer:
         start_state = tuple(s.detach().cpu().numpy() for s in state)
         times = collections.Counter()
         for t in range(T + 1):
-            obs = {k: vector.stack(timesteps, k) for k in ("segmentation", "depth", "expert_action")}
+            obs = {k: vector.stack(timesteps, k) for k in keys + ("expert_action",)}
             is_first = np.array([ts.first() for ts in timesteps], np.float32)
             f0 = time.perf_counter()
             with torch.no_grad():
@@ -606,6 +621,8 @@ class Trainer:
                 break
             state = new_state
             seg[t], depth[t], first[t], labels[t] = obs["segmentation"], obs["depth"], is_first, obs["expert_action"]
+            for k, array in bits.items():
+                array[t] = obs[k]
             valid[t] = [not ts.last() for ts in timesteps]
             expert = (rng.random(B) < beta) & (np.arange(B) >= c.learner_envs) & (labels[t] >= 0)
             actions[t] = np.where(expert, labels[t], learner)
@@ -622,7 +639,7 @@ class Trainer:
                     discounts[t, i] = c.gamma * ts.discount
                 bootstrap[t, i] = ts.last() or t == T - 1
         returns = n_step_returns(rewards, discounts, values[1:], bootstrap)
-        unroll = Unroll(seg, depth, first, valid, labels, start_state)
+        unroll = Unroll(seg, depth, first, valid, labels, start_state, **bits)
         batch = {"actions": actions, "returns": returns.astype(np.float32)}
         return unroll, batch, timesteps, state, dict(times)
 
@@ -896,7 +913,8 @@ def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device:
     if not trainer.finished:
         return None
     if trainer.eval is None:
-        modes = {mode: policies.LearnedSubPolicy(out, targets=(target,), greedy=mode == "greedy", seed=config.seed)
+        modes = {mode: policies.LearnedSubPolicy(out, targets=(target,), greedy=mode == "greedy", seed=config.seed,
+                                                   use_semantic=config.use_semantic)
                  for mode in ("sampled", "greedy")}
         seed = config.seed + 7919 * (1 + rooms.room_index(target))
         trainer.eval = {f"{split}/{mode}": result for split in ("train", "valid")
@@ -923,12 +941,35 @@ def _parse_ints(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
 
 
+def parse_targets(text: str, use_semantic: bool) -> tuple[str, ...]:
+    """The targets of ``--target``: "all" or comma-separated names.
+
+    "all" is the 8 room types and ``indoor`` for sub-policies, the 8 room
+    types for μ_s (an agent runs μ_s towards its final target only, never
+    towards a hallway).
+
+    Raises:
+      ValueError: for an unknown or repeated name.
+    """
+    if text == "all":
+        return rooms.ROOM_TYPES if use_semantic else rooms.GRAPH_NODES
+    targets = tuple(t.strip() for t in text.split(","))
+    for target in targets:
+        if target not in rooms.GRAPH_NODES:
+            raise ValueError(f"target {target!r}: expected 'all' or comma-separated names from "
+                             f"{list(rooms.GRAPH_NODES)}")
+    if len(set(targets)) != len(targets):
+        raise ValueError(f"target {text!r} names a room type twice")
+    return targets
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m leaps_mj.train policy", description=__doc__.split("\n\n")[0],
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu", help="base configuration")
-    parser.add_argument("--target", default="all", help=f"one of {list(rooms.GRAPH_NODES)} or 'all'")
+    parser.add_argument("--target", default="all",
+                        help=f"'all' or comma-separated names from {list(rooms.GRAPH_NODES)}")
     parser.add_argument("--out", default="runs/policy", help="output folder (resumed if it holds a run)")
     parser.add_argument("--device", default="cpu", help="torch device of the network (cpu, cuda)")
     parser.add_argument("--threads", type=int, default=1,
@@ -950,12 +991,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
                  if getattr(args, f.name) is not None}
     config = dataclasses.replace(PRESETS[args.preset], **overrides)
-    if args.target == "all":
-        targets = rooms.GRAPH_NODES
-    elif args.target in rooms.GRAPH_NODES:
-        targets = (args.target,)
-    else:
-        raise ValueError(f"target {args.target!r}: expected one of {list(rooms.GRAPH_NODES)} or 'all'")
+    targets = parse_targets(args.target, config.use_semantic)
     if args.stop_after is not None and args.stop_after < 1:
         raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")
     if args.threads < 1:

@@ -166,6 +166,10 @@ def test_make_agent_checks_names_and_options():
     assert isinstance(leaps, agents.LeapsAgent) and leaps.subpolicy is sub
     assert (leaps.rule, leaps.replan_every) == ("release", 7)
     assert isinstance(sub, agents.SubPolicy) and isinstance(leaps, agents.Agent)
+    with pytest.raises(ValueError, match="load_augmented"):
+        agents.make_agent("aug", None)
+    aug = agents.make_agent("aug", None, subpolicy=sub)
+    assert aug.name == "aug" and aug.subpolicy is sub
 
 
 @pytest.fixture(scope="module")

@@ -136,3 +136,54 @@ def test_seed_restarts_the_sampler():
     a = torch.rand(3, generator=sub._generator)
     sub.seed(5)
     assert torch.equal(a, torch.rand(3, generator=sub._generator))
+
+
+@pytest.fixture(scope="module")
+def aug_folder(tmp_path_factory):
+    """Untrained 24x18 μ_s networks (use_semantic) for two targets."""
+    out = tmp_path_factory.mktemp("aug")
+    torch.manual_seed(1)
+    for target in ("kitchen", "bedroom"):
+        config = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16, use_semantic=True)
+        nets.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
+    return out
+
+
+def test_mu_s_reads_the_bits_and_the_one_hot_of_its_own_target(aug_folder, env):
+    policy = policies.LearnedSubPolicy(aug_folder, targets=("kitchen", "bedroom"), seed=0, use_semantic=True)
+    seen = []
+    net = policy.nets["bedroom"]
+    original = net.forward
+
+    def spy(obs, state, done_mask=None):
+        seen.append({k: v.clone() for k, v in obs.items()})
+        return original(obs, state, done_mask)
+
+    net.forward = spy
+    ts = env.reset()  # the environment's target is kitchen; the policy runs towards bedroom
+    policy.reset("bedroom")
+    bits = []
+    for _ in range(5):
+        bits.append(np.asarray(ts.observation["semantic"], np.float32))
+        ts = env.step(policy.act(ts))
+    assert len(seen) == 5
+    target = np.zeros(rooms.NUM_ROOM_TYPES, np.float32)
+    target[rooms.room_index("bedroom")] = 1
+    for obs, expected in zip(seen, bits):
+        assert set(obs) == {"segmentation", "depth", "semantic", "target"}
+        np.testing.assert_array_equal(obs["target"].numpy(), target[None])
+        np.testing.assert_array_equal(obs["semantic"].numpy(), expected[None])
+    assert any(b.any() for b in bits), "the start room is typed: some bit is on"
+
+
+def test_pixel_and_semantic_policies_are_not_confused(folder, aug_folder):
+    with pytest.raises(ValueError, match="semantic-augmented"):
+        policies.LearnedSubPolicy(folder, targets=("kitchen",), use_semantic=True)
+    with pytest.raises(ValueError, match="pixel-only"):
+        policies.LearnedSubPolicy(aug_folder, targets=("kitchen",))
+
+
+def test_load_augmented_names_the_training_command_when_missing(monkeypatch, tmp_path):
+    monkeypatch.setattr(policies, "AUGMENTED_DIR", tmp_path)
+    with pytest.raises(ValueError, match="--use-semantic true"):
+        policies.load_augmented()

@@ -148,3 +148,38 @@ def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
     assert all(0.0 <= r["success_rate"] <= 1.0 and r["episodes"] == config.eval_episodes
                for r in extra["eval"].values())
     assert (out / "training_curves.png").stat().st_size > 0
+
+
+def test_mu_s_training_stores_and_feeds_the_bits(tiny_dataset, tmp_path):
+    """A tiny μ_s run: unrolls carry bits and target, both phases train, the result loads as μ_s."""
+    from leaps_mj import policies, rooms
+
+    config = tiny(tiny_dataset, total_steps=4 * 16, dagger_fraction=0.5, use_semantic=True)
+    trainer = train_policy.Trainer(config, "kitchen", tmp_path, progress=False)
+    unrolls = []
+    update = trainer._update
+    trainer._update = lambda unroll, batch, rng: (unrolls.append(unroll), update(unroll, batch, rng))[1]
+    trainer.train()
+    assert trainer.finished and len(unrolls) == config.iterations
+    T, B, K = config.t_max, config.num_envs, rooms.NUM_ROOM_TYPES
+    for unroll in unrolls:
+        assert unroll.semantic.shape == unroll.target.shape == (T, B, K)
+        np.testing.assert_array_equal(unroll.target[..., rooms.room_index("kitchen")], 1)
+        assert unroll.target.sum() == T * B
+    assert any(u.semantic.any() for u in unrolls), "agents in typed rooms see bits"
+    log = train_policy.read_progress(tmp_path / "kitchen" / "progress.csv")
+    assert np.isfinite(log["bc_cross_entropy"][:2]).all() and np.isfinite(log["policy_loss"][2:]).all()
+    policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",), use_semantic=True)
+    assert policy.nets["kitchen"].config.use_semantic
+
+
+def test_parse_targets():
+    from leaps_mj import rooms
+
+    assert train_policy.parse_targets("all", False) == rooms.GRAPH_NODES
+    assert train_policy.parse_targets("all", True) == rooms.ROOM_TYPES
+    assert train_policy.parse_targets("kitchen, indoor", False) == ("kitchen", "indoor")
+    with pytest.raises(ValueError, match="'attic'"):
+        train_policy.parse_targets("kitchen,attic", False)
+    with pytest.raises(ValueError, match="twice"):
+        train_policy.parse_targets("kitchen,kitchen", False)
