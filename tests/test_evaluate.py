@@ -134,3 +134,15 @@ def test_main_records_episodes_as_mcap(tiny_dataset, tmp_path, capsys):
     assert evaluate.main(["--agent", "random", "--dataset", str(tiny_dataset), "--out", str(tmp_path / "e2"),
                           "--record", str(rec), "--record-mode", "bogus"]) == 2
     assert "record mode 'bogus'" in capsys.readouterr().err
+
+
+def test_learned_baselines_run_on_the_shipped_checkpoints(tiny_dataset, tmp_path):
+    """aug (μ_s) and the controller over learned sub-policies: rows for every episode, the same on a rerun."""
+    specs = [evaluate.AGENTS["aug"], evaluate.AGENTS["controller"]]
+    config = evaluate.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=30, subpolicy="learned")
+    one = evaluate.run(config, specs, [0, 1], tmp_path / "one", progress=False)
+    two = evaluate.run(config, specs, [0, 1], tmp_path / "two", workers=2, chunk=1, progress=False)
+    assert one == two
+    assert set(one) == {"aug", "controller"}
+    for rows in one.values():
+        assert [int(r["episode"]) for r in rows] == [0, 1] and all(int(r["steps"]) <= 30 for r in rows)

@@ -183,6 +183,19 @@ def test_pixel_and_semantic_policies_are_not_confused(folder, aug_folder):
         policies.LearnedSubPolicy(aug_folder, targets=("kitchen",))
 
 
+def test_load_augmented_loads_the_shipped_mu_s(tiny_dataset):
+    policy = policies.load_augmented(seed=0)
+    assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.ROOM_TYPES
+    assert policy.use_semantic and all(meta["eval"] for meta in policy.metadata.values())
+    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=40, height=30, horizon=5)
+    try:
+        env.reset()
+        actions = run(policy, env, env.episode, steps=4)
+    finally:
+        env.close()
+    assert all(0 <= a < rooms.NUM_ACTIONS for a in actions)
+
+
 def test_load_augmented_names_the_training_command_when_missing(monkeypatch, tmp_path):
     monkeypatch.setattr(policies, "AUGMENTED_DIR", tmp_path)
     with pytest.raises(ValueError, match="--use-semantic true"):
