@@ -8,6 +8,10 @@ Prints one table, every row measured in this run, interleaved over rounds
 * ``bare render``: the same house, the same poses, only MuJoCo kinematics +
   the one-pass segmentation/depth render: the floor under the env's cost.
   ``roomnav / bare`` is the env's overhead.
+* ``env work only``: the RoomNav environment with its render call replaced
+  by a copy of one cached frame: the cost of everything the env does besides
+  drawing (collision-checked move, label lookup, see test, geodesic, bits,
+  observation), also printed in µs per step.
 * ``miniworld``: Farama MiniWorld FourRooms at the same resolution (RGB), the
   lightweight peer (``pip install miniworld``; rendered headless through
   pyglet's EGL mode). Skipped with a note when not installed.
@@ -64,6 +68,14 @@ def bare_render_stepper(env, poses):
     return step
 
 
+def env_work_stepper(dataset, width, height, seed=0):
+    """A RoomNav stepper whose renderer hands back one cached frame instead of drawing."""
+    env, step, _ = roomnav_stepper(dataset, width, height, seed)
+    seg, depth = env.renderer.render_segments(env.physics.data.ptr)
+    env.renderer.render_segments = lambda data: (seg.copy(), depth.copy())
+    return env, step
+
+
 def miniworld_stepper(width, height, seed=0):
     try:
         import pyglet
@@ -101,20 +113,25 @@ def main(argv=None):
     p.add_argument("--workers", type=int, nargs="*", default=[1, 2])
     args = p.parse_args(argv)
 
-    rows = []
+    rows, notes = [], []
     for width, height in ((120, 90), (64, 48)):
         env, env_step, poses = roomnav_stepper(args.dataset, width, height)
         _rate(env_step, 0.5)  # warm-up: compiles the first houses, records poses
         bare = bare_render_stepper(env, poses)
+        work_env, work = env_work_stepper(args.dataset, width, height)
         mw, note = miniworld_stepper(width, height)
-        rates = {"roomnav": [], "bare render": [], "miniworld": []}
+        rates = {"roomnav": [], "bare render": [], "env work only": [], "miniworld": []}
         for _ in range(args.rounds):
             rates["roomnav"].append(_rate(env_step, args.seconds))
             rates["bare render"].append(_rate(bare, args.seconds))
+            rates["env work only"].append(_rate(work, args.seconds))
             if mw is not None:
                 rates["miniworld"].append(_rate(mw, args.seconds))
         env.close()
+        work_env.close()
         med = {k: statistics.median(v) for k, v in rates.items() if v}
+        notes.append(f"{width}x{height}: env work {1e6 / med['env work only']:.0f} us/step; "
+                     f"roomnav / bare render = {med['roomnav'] / med['bare render']:.2f}")
         for k, v in med.items():
             rel = f"{v / med['roomnav']:.2f}" if k != "roomnav" else "1.00"
             rows.append((f"{width}x{height}", k, f"{v:,.0f}", rel))
@@ -126,10 +143,12 @@ def main(argv=None):
 
     print(f"\nsteps/s, median of {args.rounds} interleaved rounds of {args.seconds:g} s "
           "(rel = rate / roomnav single-process rate at that resolution)\n")
-    print(f"| {'resolution':<10} | {'what':<12} | {'steps/s':>9} | {'rel':>6} |")
-    print(f"|{'-' * 12}|{'-' * 14}|{'-' * 11}|{'-' * 8}|")
+    print(f"| {'resolution':<10} | {'what':<13} | {'steps/s':>9} | {'rel':>6} |")
+    print(f"|{'-' * 12}|{'-' * 15}|{'-' * 11}|{'-' * 8}|")
     for r in rows:
-        print(f"| {r[0]:<10} | {r[1]:<12} | {r[2]:>9} | {r[3]:>6} |")
+        print(f"| {r[0]:<10} | {r[1]:<13} | {r[2]:>9} | {r[3]:>6} |")
+    print()
+    print("\n".join(notes))
 
 
 if __name__ == "__main__":
