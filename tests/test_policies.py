@@ -113,6 +113,12 @@ def test_load_default_names_the_training_command_when_missing(monkeypatch, tmp_p
         policies.load_default()
 
 
+def test_every_graph_node_resets_including_the_untyped_hallway():
+    policy = policies.load_default()
+    for target in rooms.GRAPH_NODES:  # indoor has no one-hot; LEAPS hands it to sub-policies
+        policy.reset(target)
+
+
 def test_load_default_loads_the_shipped_policies(tiny_dataset):
     policy = policies.load_default(seed=0)
     assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.GRAPH_NODES
