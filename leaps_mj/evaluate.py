@@ -329,15 +329,18 @@ def read_rows(path: pathlib.Path) -> list[dict]:
 
 
 def append_rows(path: pathlib.Path, rows: list[dict]) -> None:
-    """Appends rows to a per-episode CSV by rewriting it atomically."""
-    old = path.read_bytes() if path.is_file() else b""
+    """Adds rows to a per-episode CSV by rewriting it atomically, sorted by episode.
+
+    Sorting makes the file's bytes independent of the order in which worker
+    chunks finish.
+    """
+    merged = sorted(read_rows(path) + list(rows), key=lambda r: r["episode"])
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
-    if not old:
-        writer.writeheader()
-    for r in rows:
+    writer.writeheader()
+    for r in merged:
         writer.writerow({k: "" if r[k] is None else r[k] for k in CSV_FIELDS})
-    dataset_lib.write_atomic(path, old + buf.getvalue().encode())
+    dataset_lib.write_atomic(path, buf.getvalue().encode())
 
 
 def _check_config(out: pathlib.Path, config: EvalConfig) -> None:

@@ -122,7 +122,7 @@ PRESETS = {
     # Seconds: tests and smoke runs.
     "tiny": TrainConfig(horizon=40, option_steps=10, episodes=4, batch_episodes=2, eval_episodes=2,
                         eval_horizon=40),
-    # About 40 minutes on 2 shared CPU cores with the learned sub-policies. The
+    # About 25 minutes on 2 shared CPU cores with the learned sub-policies. The
     # paper's lr 1e-3 leaves the controller uniform (entropy ln 8) after this
     # few updates (1200 episodes in batches of 8: 150 updates); 10x the rate
     # in batches of 4 learns.

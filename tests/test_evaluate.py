@@ -104,6 +104,9 @@ def test_results_do_not_depend_on_workers(tiny_dataset, tmp_path):
     one = evaluate.run(config, specs, [0, 1, 2], tmp_path / "one", progress=False)
     two = evaluate.run(config, specs, [0, 1, 2], tmp_path / "two", workers=2, chunk=1, progress=False)
     assert one == two
+    for label in ("random", "pure"):  # files too: sorted by episode, whichever chunk finished first
+        assert (tmp_path / "one" / f"episodes_{label}.csv").read_bytes() == \
+            (tmp_path / "two" / f"episodes_{label}.csv").read_bytes()
 
 
 def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
