@@ -41,6 +41,17 @@ def run(policy, env, spec, steps=12):
     return actions
 
 
+def assert_acts_in_a_fresh_env(policy, dataset, width, height):
+    """The policy takes 4 valid actions in an environment of the given resolution."""
+    env = leaps_mj.load(str(dataset), "train", seed=0, width=width, height=height, horizon=5)
+    try:
+        env.reset()
+        actions = run(policy, env, env.episode, steps=4)
+    finally:
+        env.close()
+    assert actions and all(0 <= a < rooms.NUM_ACTIONS for a in actions)
+
+
 def test_acts_with_valid_actions_on_a_real_timestep(folder, env):
     policy = policies.LearnedSubPolicy(folder, targets=("kitchen", "bedroom"), seed=3)
     assert isinstance(policy, agents.SubPolicy)
@@ -123,13 +134,7 @@ def test_load_default_loads_the_shipped_policies(tiny_dataset):
     policy = policies.load_default(seed=0)
     assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.GRAPH_NODES
     assert all(meta["iteration"] == 450 and meta["eval"] for meta in policy.metadata.values())
-    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=5)  # 3x: subsampled
-    try:
-        env.reset()
-        actions = run(policy, env, env.episode, steps=4)
-    finally:
-        env.close()
-    assert all(0 <= a < rooms.NUM_ACTIONS for a in actions)
+    assert_acts_in_a_fresh_env(policy, tiny_dataset, 120, 90)  # 3x: subsampled
 
 
 def test_seed_restarts_the_sampler():
@@ -193,13 +198,7 @@ def test_load_augmented_loads_the_shipped_mu_s(tiny_dataset):
     policy = policies.load_augmented(seed=0)
     assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.ROOM_TYPES
     assert policy.use_semantic and all(meta["eval"] for meta in policy.metadata.values())
-    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=40, height=30, horizon=5)
-    try:
-        env.reset()
-        actions = run(policy, env, env.episode, steps=4)
-    finally:
-        env.close()
-    assert all(0 <= a < rooms.NUM_ACTIONS for a in actions)
+    assert_acts_in_a_fresh_env(policy, tiny_dataset, 40, 30)
 
 
 def test_load_augmented_names_the_training_command_when_missing(monkeypatch, tmp_path):
