@@ -37,7 +37,7 @@ def main(argv=None) -> int:
     if name == "all":
         for step in ALL:
             print(f"== python -m leaps_mj.train {step} {' '.join(rest)}", flush=True)
-            code = importlib.import_module(TRAINERS[step]).main(rest)
+            code = _run(TRAINERS[step], rest)
             if code:
                 return code
         return 0
@@ -45,11 +45,20 @@ def main(argv=None) -> int:
         print(f"unknown trainer {name!r}; expected one of {sorted(TRAINERS) + ['all']}", file=sys.stderr)
         return 2
     try:
-        module = importlib.import_module(TRAINERS[name])
+        importlib.import_module(TRAINERS[name])
     except ModuleNotFoundError as e:
         print(f"trainer {name!r} is not available: {e}", file=sys.stderr)
         return 2
-    return module.main(rest) or 0
+    return _run(TRAINERS[name], rest)
+
+
+def _run(module: str, argv: list[str]) -> int:
+    """Runs a trainer's ``main``; a bad option value (ValueError) is one line on stderr and exit code 2."""
+    try:
+        return importlib.import_module(module).main(argv) or 0
+    except ValueError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -183,3 +183,11 @@ def test_parse_targets():
         train_policy.parse_targets("kitchen,attic", False)
     with pytest.raises(ValueError, match="twice"):
         train_policy.parse_targets("kitchen,kitchen", False)
+
+
+def test_the_train_command_reports_bad_values_in_one_line(capsys):
+    from leaps_mj import train
+
+    assert train.main(["policy", "--target", "attic", "--out", "/nonexistent"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: target 'attic'") and "Traceback" not in err
