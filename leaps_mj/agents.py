@@ -1,4 +1,5 @@
-"""Agents for RoomNav: random, pure sub-policy, LEAPS, and the oracle.
+"""Agents for RoomNav: random, pure sub-policy, LEAPS, and the oracle (``make_agent`` also builds
+the learned baselines of :mod:`leaps_mj.baselines`: "aug" and "controller").
 
 Two small interfaces are the contract between agents, sub-policies, the
 evaluation loop (:mod:`leaps_mj.evaluate`) and the episode recorder:
