@@ -122,11 +122,11 @@ PRESETS = {
     # Seconds: tests and smoke runs.
     "tiny": TrainConfig(horizon=40, option_steps=10, episodes=4, batch_episodes=2, eval_episodes=2,
                         eval_horizon=40),
-    # About 25 minutes on 2 shared CPU cores with the learned sub-policies. The
+    # About 45 minutes on 2 shared CPU cores with the learned sub-policies. The
     # paper's lr 1e-3 leaves the controller uniform (entropy ln 8) after this
     # few updates (1200 episodes in batches of 8: 150 updates); 10x the rate
     # in batches of 4 learns.
-    "cpu": TrainConfig(lr=1e-2, episodes=4000, batch_episodes=4),
+    "cpu": TrainConfig(lr=1e-2, episodes=10_000, batch_episodes=4),
     # The paper's learning rate, more episodes, its longest horizon.
     "paper": TrainConfig(horizon=1000, episodes=20_000, batch_episodes=16, eval_episodes=500, eval_horizon=1000),
 }
