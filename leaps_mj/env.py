@@ -357,9 +357,7 @@ class RoomNav(base.Task):
         spec = self.episode
         physics.set_agent_pose(spec.start)
         self.target_index = rooms.room_index(spec.target)
-        self.target_onehot = np.zeros(rooms.NUM_ROOM_TYPES, dtype=np.uint8)
-        if self.target_index < rooms.NUM_ROOM_TYPES:
-            self.target_onehot[self.target_index] = 1
+        self.target_onehot = rooms.target_onehot(spec.target)
         # Segment index → whether its pixels count for seeing the target.
         self._see_mask = self._env.segment_luts[1][self.target_index]
         self.collision = False
@@ -405,10 +403,14 @@ class RoomNav(base.Task):
         self.was_in_target = self.in_target
         self.bits = hm.semantic_bits(x, y)
         self.in_target = hm.in_node(self.bits, self.target_index)
-        nothing_to_see = not rooms.SEE_OBJECTS.get(self.episode.target)
-        sees = self.in_target and (nothing_to_see or self.target_fraction >= self.config.success_fraction)
-        self.success_streak = self.success_streak + 1 if sees else 0
+        self.success_streak = self.success_streak + 1 if self.sees() else 0
         self.success = self.success_streak >= self.config.success_steps
+
+    def sees(self) -> bool:
+        """The "see" test at the current state: in the target room and, where the target has
+        see-objects, at least ``success_fraction`` of the frame on them (outdoor, indoor: being there)."""
+        nothing_to_see = not rooms.SEE_OBJECTS.get(self.episode.target)
+        return self.in_target and (nothing_to_see or self.target_fraction >= self.config.success_fraction)
 
     def _render(self, physics):
         if not self.config.pixels:

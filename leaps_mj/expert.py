@@ -142,10 +142,9 @@ class GeodesicExpert:
         task = self.env.task
         pose = self.env.physics.agent_pose()
         target = task.episode.target
-        nothing_to_see = not rooms.SEE_OBJECTS.get(target)  # outdoor, indoor: being there suffices
-        if task.in_target and (nothing_to_see or task.target_fraction >= task.config.success_fraction):
+        if task.sees():
             return STAY
-        if nothing_to_see:
+        if not rooms.SEE_OBJECTS.get(target):  # outdoor, indoor: being there suffices
             return self.step_towards(target, False, pose) or FORWARD
         action = self.step_towards(target, True, pose)
         if action is not None:

@@ -106,10 +106,7 @@ class LearnedSubPolicy:
             raise ValueError(f"no sub-policy for target {target!r}; loaded: {list(self.targets)}")
         self._net = self.nets[target]
         self._state = self._net.initial_state(1)
-        # As the environment's target observation: the type's one-hot, all zero for ``indoor``.
-        self._target_onehot = torch.zeros(1, rooms.NUM_ROOM_TYPES)
-        if rooms.room_index(target) < rooms.NUM_ROOM_TYPES:
-            self._target_onehot[0, rooms.room_index(target)] = 1.0
+        self._target_onehot = torch.as_tensor(rooms.target_onehot(target), dtype=torch.float32)[None]
 
     def _frame(self, frame) -> np.ndarray:
         """The frame at the policy's resolution (subsampled from an integer multiple)."""

@@ -47,6 +47,19 @@ def room_index(room_type: str) -> int:
         ) from None
 
 
+def target_onehot(target: str) -> np.ndarray:
+    """The ``target`` observation of a graph node: (K,) uint8 one-hot, all zero for ``indoor``.
+
+    Raises:
+      ValueError: for an unknown room type.
+    """
+    onehot = np.zeros(NUM_ROOM_TYPES, dtype=np.uint8)
+    index = room_index(target)
+    if index < NUM_ROOM_TYPES:
+        onehot[index] = 1
+    return onehot
+
+
 @functools.lru_cache(maxsize=None)
 def reference() -> dict:
     """The original release's learned prior, room frequencies and see-objects."""

@@ -37,25 +37,26 @@ def main(argv=None) -> int:
     if name == "all":
         for step in ALL:
             print(f"== python -m leaps_mj.train {step} {' '.join(rest)}", flush=True)
-            code = _run(TRAINERS[step], rest)
+            code = _run(step, rest)
             if code:
                 return code
         return 0
     if name not in TRAINERS:
         print(f"unknown trainer {name!r}; expected one of {sorted(TRAINERS) + ['all']}", file=sys.stderr)
         return 2
+    return _run(name, rest)
+
+
+def _run(name: str, argv: list[str]) -> int:
+    """Runs a trainer's ``main``; a missing trainer module or a bad option value (ValueError) is one line
+    on stderr and exit code 2."""
     try:
-        importlib.import_module(TRAINERS[name])
+        module = importlib.import_module(TRAINERS[name])
     except ModuleNotFoundError as e:
         print(f"trainer {name!r} is not available: {e}", file=sys.stderr)
         return 2
-    return _run(TRAINERS[name], rest)
-
-
-def _run(module: str, argv: list[str]) -> int:
-    """Runs a trainer's ``main``; a bad option value (ValueError) is one line on stderr and exit code 2."""
     try:
-        return importlib.import_module(module).main(argv) or 0
+        return module.main(argv) or 0
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
