@@ -29,7 +29,8 @@ import time
 import numpy as np
 
 import leaps_mj
-from leaps_mj import rooms, vector
+from leaps_mj.environment import vector
+from leaps_mj.world import rooms
 
 
 def _rate(fn, seconds: float) -> float:

@@ -28,7 +28,9 @@ import time
 import numpy as np
 
 import leaps_mj
-from leaps_mj import record, rooms, semantic
+from leaps_mj.planning import semantic
+from leaps_mj.records import recorder as record
+from leaps_mj.world import rooms
 
 
 def run(env, specs, actions, recorder=None, info=None) -> tuple[float, int]:

@@ -2,7 +2,7 @@
 
 ``python benchmarks/train_throughput.py [--presets cpu paper] [--iterations 4] [--num-envs 8] [--device cpu]``
 
-Runs a few iterations of :class:`leaps_mj.train_policy.Trainer` per preset
+Runs a few iterations of :class:`leaps_mj.learning.train_policy.Trainer` per preset
 (in a temporary folder; the first ``--warmup`` iterations, which compile the
 houses, are not counted) and prints one row per preset: training samples per
 second of wall-clock, and per 1000 samples the seconds spent
@@ -30,7 +30,7 @@ import tempfile
 
 import numpy as np
 
-from leaps_mj import nets, train_policy
+from leaps_mj.learning import nets, policy_eval, train_policy
 
 _COLUMNS = (
     ("act_forward_seconds", "act fwd"),
@@ -53,7 +53,7 @@ def measure(preset: str, iterations: int, warmup: int, num_envs: int, device: st
     with tempfile.TemporaryDirectory(prefix="train_throughput_") as out:
         trainer = train_policy.Trainer(config, target, out, device=device, progress=False)
         trainer.train()
-        log = train_policy.read_progress(f"{out}/{target}/progress.csv")
+        log = policy_eval.read_progress(f"{out}/{target}/progress.csv")
     rows = slice(warmup, None)
     per_k = 1000 / config.batch
     return {

@@ -20,7 +20,11 @@ import sys
 import tempfile
 
 import leaps_mj
-from leaps_mj import agents, episodes, evaluate, record, replay
+from leaps_mj.environment import episodes
+from leaps_mj.evaluation import registry
+from leaps_mj.planning import agents
+from leaps_mj.records import recorder as record
+from leaps_mj.records import replay
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
@@ -29,7 +33,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--dataset", default="roomnav-v1")
     p.add_argument("--split", default="test")
-    p.add_argument("--prior", default="cpu", help="LEAPS prior (see leaps_mj.agents.load_model)")
+    p.add_argument("--prior", default="cpu", help="LEAPS prior (see leaps_mj.planning.agents.load_model)")
     p.add_argument("--min-plan-length", type=int, default=3)
     p.add_argument("--min-subtargets", type=int, default=3)
     p.add_argument("--max-steps", type=int, default=200)
@@ -53,10 +57,10 @@ def _record(env, args) -> int:
                   "prior": args.prior, "horizon": args.max_steps, "seed": args.seed}
     with tempfile.TemporaryDirectory() as tmp:
         for i, spec in enumerate(specs[: args.tries]):
-            agent = agents.make_agent("leaps", env, seed=args.seed, model=model)
+            agent = registry.make_agent("leaps", env, seed=args.seed, model=model)
             path = pathlib.Path(tmp) / f"{i}.mcap"
             with record.EpisodeRecorder(path, env, run_config={**run_config, "episode": spec.to_json()}) as rec:
-                result = evaluate.run_episode(env, agent, spec, args.max_steps, observer=rec)
+                result = episodes.run_episode(env, agent, spec, args.max_steps, observer=rec)
             subtargets = replay.load(path).outcome["subtargets"]
             print(f"{spec.house} -> {spec.target} (plan length {spec.plan_length}): success={result['success']} "
                   f"steps={result['steps']} sub-targets={subtargets}")

@@ -29,7 +29,7 @@ __version__ = "0.1.0"
 
 
 def load(*args, **kwargs):
-    """Builds a RoomNav environment; see :func:`leaps_mj.env.load`."""
-    from leaps_mj import env
+    """Builds a RoomNav environment; see :func:`leaps_mj.environment.roomnav.load`."""
+    from leaps_mj.environment import roomnav as env
 
     return env.load(*args, **kwargs)

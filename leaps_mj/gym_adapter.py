@@ -1,27 +1,9 @@
-"""Gymnasium adapter: RoomNav as a gymnasium environment through shimmy.
+"""The gymnasium id's module: ``gymnasium.make("leaps_mj.gym_adapter:leaps_mj/RoomNav-v1")``.
 
-Importing this module registers ``leaps_mj/RoomNav-v1``::
-
-    import gymnasium as gym
-    env = gym.make("leaps_mj.gym_adapter:leaps_mj/RoomNav-v1", split="train", width=64, height=48)
-
-Keyword arguments are those of :func:`leaps_mj.load`. ``reset(seed=…)``
-reseeds the task's episode sampler (shimmy replaces its RandomState).
-Observations are the dm_env dict; the action space is ``Discrete(9)``.
+Importing it registers the id (:mod:`leaps_mj.environment.gym_adapter`); it
+stays at the package top because the id string users type names it.
 """
 
-import gymnasium
-from shimmy.dm_control_compatibility import DmControlCompatibilityV0
+from leaps_mj.environment.gym_adapter import ENV_ID, make
 
-import leaps_mj
-
-ENV_ID = "leaps_mj/RoomNav-v1"
-
-
-def make(render_mode=None, **kwargs) -> DmControlCompatibilityV0:
-    """A gymnasium environment wrapping :func:`leaps_mj.load` (kwargs)."""
-    return DmControlCompatibilityV0(leaps_mj.load(**kwargs), render_mode=render_mode)
-
-
-if ENV_ID not in gymnasium.registry:
-    gymnasium.register(ENV_ID, entry_point=make, disable_env_checker=True)
+__all__ = ["ENV_ID", "make"]

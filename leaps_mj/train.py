@@ -2,11 +2,11 @@
 
 Trainers (each a single-file module with its own ``main(argv)``, cleanrl style):
 
-  prior       learn the room-connectivity prior by random exploration (leaps_mj.train_prior)
-  obs-noise   grid-search the observation noise on the validation episodes (leaps_mj.tune_obs_noise)
-  policy      train per-target CNN+LSTM sub-policies (leaps_mj.train_policy)
-  classifier  train the CNN room-type classifier (leaps_mj.train_classifier)
-  controller  train the LSTM controller baseline (leaps_mj.train_controller)
+  prior       learn the room-connectivity prior by random exploration (leaps_mj.learning.train_prior)
+  obs-noise   grid-search the observation noise on the validation episodes (leaps_mj.evaluation.tune_obs_noise)
+  policy      train per-target CNN+LSTM sub-policies (leaps_mj.learning.train_policy)
+  classifier  train the CNN room-type classifier (leaps_mj.learning.train_classifier)
+  controller  train the LSTM controller baseline (leaps_mj.learning.train_controller)
   all         reproduce the shipped checkpoints: prior, policy (every target), obs-noise
 
 ``python -m leaps_mj.train <trainer> --help`` lists a trainer's options.
@@ -18,11 +18,11 @@ import importlib
 import sys
 
 TRAINERS = {
-    "prior": "leaps_mj.train_prior",
-    "obs-noise": "leaps_mj.tune_obs_noise",
-    "policy": "leaps_mj.train_policy",
-    "classifier": "leaps_mj.train_classifier",
-    "controller": "leaps_mj.train_controller",
+    "prior": "leaps_mj.learning.train_prior",
+    "obs-noise": "leaps_mj.evaluation.tune_obs_noise",
+    "policy": "leaps_mj.learning.train_policy",
+    "classifier": "leaps_mj.learning.train_classifier",
+    "controller": "leaps_mj.learning.train_controller",
 }
 #: What ``all`` runs, in order (each trainer resumes from its checkpoints).
 ALL = ("prior", "policy", "obs-noise")

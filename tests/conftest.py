@@ -5,7 +5,8 @@ import pathlib
 import pytest
 
 import leaps_mj  # noqa: F401  (selects the GL backend before dm_control loads)
-from leaps_mj import dataset, episodes
+from leaps_mj.environment import episodes
+from leaps_mj.world import dataset
 
 
 @pytest.fixture(scope="session")

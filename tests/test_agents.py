@@ -5,7 +5,10 @@ import numpy as np
 import pytest
 
 import leaps_mj
-from leaps_mj import agents, episodes, rooms, semantic
+from leaps_mj.environment import episodes
+from leaps_mj.evaluation import registry
+from leaps_mj.planning import agents, semantic
+from leaps_mj.world import rooms
 
 N = semantic.NUM_NODES
 
@@ -156,19 +159,19 @@ def test_random_agent_is_seeded():
 
 def test_make_agent_checks_names_and_options():
     with pytest.raises(ValueError, match="unknown agent"):
-        agents.make_agent("greedy", None)
+        registry.make_agent("greedy", None)
     with pytest.raises(ValueError, match="takes no options"):
-        agents.make_agent("random", None, rule="paper")
+        registry.make_agent("random", None, rule="paper")
     with pytest.raises(ValueError, match="no prior file"):
         agents.load_model("/nonexistent/prior.json")
     sub = FakeSubPolicy()
-    leaps = agents.make_agent("leaps", None, subpolicy=sub, prior="reference", rule="release", replan_every=7)
+    leaps = registry.make_agent("leaps", None, subpolicy=sub, prior="reference", rule="release", replan_every=7)
     assert isinstance(leaps, agents.LeapsAgent) and leaps.subpolicy is sub
     assert (leaps.rule, leaps.replan_every) == ("release", 7)
     assert isinstance(sub, agents.SubPolicy) and isinstance(leaps, agents.Agent)
     with pytest.raises(ValueError, match="load_augmented"):
-        agents.make_agent("aug", None)
-    aug = agents.make_agent("aug", None, subpolicy=sub)
+        registry.make_agent("aug", None)
+    aug = registry.make_agent("aug", None, subpolicy=sub)
     assert aug.name == "aug" and aug.subpolicy is sub
 
 
@@ -193,7 +196,7 @@ def _run(env, agent, spec):
 
 @pytest.mark.parametrize("name", ["pure", "oracle"])
 def test_local_expert_and_oracle_reach_a_near_target(env, tiny_dataset, name):
-    assert _run(env, agents.make_agent(name, env, seed=1), _episode(tiny_dataset, 1))
+    assert _run(env, registry.make_agent(name, env, seed=1), _episode(tiny_dataset, 1))
 
 
 def test_local_expert_explores_far_from_the_target(env, tiny_dataset):

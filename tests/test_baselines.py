@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from leaps_mj import baselines, nets, rooms, train_controller
+from leaps_mj.learning import baselines, nets, train_controller
+from leaps_mj.world import rooms
 
 K = rooms.NUM_ROOM_TYPES
 
@@ -156,7 +157,7 @@ def test_tiny_controller_trainer_saves_resumes_and_validates(tiny_dataset, tmp_p
     config = dataclasses.replace(train_controller.PRESETS["tiny"], dataset=str(tiny_dataset))
     first = train_controller.Trainer(config, tmp_path, progress=False)
     first.train(stop_after=1)
-    assert first.update == 1 and not first.finished
+    assert first.iteration == 1 and not first.finished
     second = train_controller.Trainer(config, tmp_path, progress=False)
     assert second.update == 1
     second.train()

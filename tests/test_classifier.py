@@ -7,7 +7,10 @@ import pytest
 import torch
 
 import leaps_mj
-from leaps_mj import agents, classifier, episodes, evaluate, nets, rooms, train_classifier
+from leaps_mj.environment import episodes
+from leaps_mj.learning import classifier, nets, train_classifier
+from leaps_mj.planning import agents
+from leaps_mj.world import rooms
 
 KITCHEN = rooms.room_index("kitchen")
 
@@ -160,7 +163,7 @@ def test_tiny_trainer_saves_resumes_and_refuses_another_config(tiny_dataset, tmp
     config = dataclasses.replace(train_classifier.PRESETS["tiny"], dataset=str(tiny_dataset))
     first = train_classifier.Trainer(config, tmp_path, progress=False)
     first.train(stop_after=1)
-    assert first.epoch == 1 and not first.finished
+    assert first.iteration == 1 and not first.finished
     data_time = (tmp_path / "data_train.npz").stat().st_mtime_ns
     second = train_classifier.Trainer(config, tmp_path, progress=False)
     assert second.epoch == 1 and len(second.history) == 1
@@ -183,7 +186,7 @@ def test_bit_agreement_counts_against_the_ground_truth(tiny_dataset, spec):
     env = classifier.ClassifierBits(make_env(tiny_dataset), FakeClassifier())
     try:
         score = classifier.BitAgreement()
-        result = evaluate.run_episode(env, agents.RandomAgent(0), spec, 6, observer=score)
+        result = episodes.run_episode(env, agents.RandomAgent(0), spec, 6, observer=score)
         summary = score.summary()
         assert summary["steps"] == result["steps"] == 6
         truth_on = score.tp + score.fn

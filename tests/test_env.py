@@ -9,8 +9,9 @@ import pytest
 from dm_env import test_utils
 
 import leaps_mj
-from leaps_mj import env as envlib
-from leaps_mj import episodes, expert, rooms
+from leaps_mj.environment import episodes, expert
+from leaps_mj.environment import roomnav as envlib
+from leaps_mj.world import rooms
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 import leaps_mj
-from leaps_mj import agents, episodes, evaluate
+from leaps_mj.environment import episodes
+from leaps_mj.evaluation import harness as evaluate
+from leaps_mj.planning import agents
 
 
 class Recorder:
@@ -30,16 +32,16 @@ def test_run_episode_reports_and_calls_the_observer(tiny_dataset):
     env = leaps_mj.load(str(tiny_dataset), "test", reward="sparse", horizon=300)
     try:
         obs = Recorder()
-        result = evaluate.run_episode(env, agents.OracleAgent(env), spec, 300, observer=obs)
+        result = episodes.run_episode(env, agents.OracleAgent(env), spec, 300, observer=obs)
         assert result["success"] and result["success_step"] == result["steps"] <= 300
         assert (result["house"], result["target"], result["plan_length"]) == (spec.house, spec.target,
                                                                              spec.plan_length)
         assert obs.calls[0] == ("begin", spec.target, "oracle") and obs.calls[-1] == ("end", True)
         assert len(obs.calls) == result["steps"] + 2
-        short = evaluate.run_episode(env, agents.RandomAgent(0), spec, 3)
+        short = episodes.run_episode(env, agents.RandomAgent(0), spec, 3)
         assert short["steps"] == 3 and short["success_step"] is None
         with pytest.raises(ValueError, match="exceeds the environment's horizon"):
-            evaluate.run_episode(env, agents.RandomAgent(0), spec, 301)
+            episodes.run_episode(env, agents.RandomAgent(0), spec, 301)
     finally:
         env.close()
 
@@ -59,13 +61,13 @@ def test_wilson_interval():
 
 def test_select_episodes_is_stratified_and_seeded(tiny_dataset):
     specs = episodes.load_split(str(tiny_dataset), "test")
-    picked = evaluate.select_episodes(specs, per_length=2, seed=3)
+    picked = episodes.select_episodes(specs, per_length=2, seed=3)
     lengths = [specs[i].plan_length for i in picked]
-    assert picked == sorted(picked) and picked == evaluate.select_episodes(specs, per_length=2, seed=3)
+    assert picked == sorted(picked) and picked == episodes.select_episodes(specs, per_length=2, seed=3)
     assert all(lengths.count(L) == min(2, sum(s.plan_length == L for s in specs)) for L in set(lengths))
-    assert evaluate.select_episodes(specs, limit=4) == [0, 1, 2, 3]
+    assert episodes.select_episodes(specs, limit=4) == [0, 1, 2, 3]
     with pytest.raises(ValueError, match="per_length"):
-        evaluate.select_episodes(specs, per_length=0)
+        episodes.select_episodes(specs, per_length=0)
 
 
 def _main(tiny_dataset, out, *extra):
@@ -91,7 +93,7 @@ def test_main_writes_csvs_table_plots_and_resumes(tiny_dataset, tmp_path, monkey
     def no_more_episodes(*args, **kwargs):
         raise AssertionError("a finished episode was run again")
 
-    monkeypatch.setattr(evaluate, "run_episode", no_more_episodes)
+    monkeypatch.setattr(episodes, "run_episode", no_more_episodes)
     assert _main(tiny_dataset, out) == 0
     assert (out / "results.md").read_text() == table
     assert _main(tiny_dataset, out, "--seed", "1") == 2  # other settings: refuse to mix
@@ -110,7 +112,7 @@ def test_results_do_not_depend_on_workers(tiny_dataset, tmp_path):
 
 
 def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
-    from leaps_mj import casestudy
+    from leaps_mj.evaluation import casestudy
 
     out = tmp_path / "case.png"
     argv = ["--episode", "7", "--dataset", str(tiny_dataset), "--prior", "reference", "--horizon", "120",
@@ -122,7 +124,7 @@ def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
 
 
 def test_main_records_episodes_as_mcap(tiny_dataset, tmp_path, capsys):
-    from leaps_mj import replay
+    from leaps_mj.records import replay
 
     out, rec = tmp_path / "eval", tmp_path / "records"
     code = evaluate.main(["--agent", "random", "leaps", "--dataset", str(tiny_dataset), "--split", "test",

@@ -5,13 +5,13 @@ import pathlib
 import subprocess
 import sys
 
-import leaps_mj  # noqa: F401  (sets MUJOCO_GL before dm_control is imported)
-
 import mujoco
 import numpy as np
 import pytest
 
-from leaps_mj import dataset, house_stats, houses, mjcf, navgrid, rooms
+import leaps_mj  # noqa: F401  (sets MUJOCO_GL before dm_control is imported)
+from leaps_mj.world import dataset, furnish, generator, houses, mjcf, navgrid, rooms
+from leaps_mj.world import stats as house_stats
 
 REPO = pathlib.Path(__file__).resolve().parent.parent
 MAKE_HOUSES = REPO / "tools" / "make_houses.py"
@@ -24,11 +24,11 @@ N_SET = 10
 def house_set():
     """(house, compiled model) for the first houses of a dataset of seed 0 plus
     the first house with a garage, so every room type is covered."""
-    out = [houses.generate(dataset.house_seed(0, "train", i), dataset.house_id("train", i)) for i in range(N_SET)]
+    out = [generator.generate(dataset.house_seed(0, "train", i), dataset.house_id("train", i)) for i in range(N_SET)]
     if not any("garage" in h.room_types for h in out):
         i = N_SET
         while not any("garage" in h.room_types for h in out):
-            out.append(houses.generate(dataset.house_seed(0, "train", i), dataset.house_id("train", i)))
+            out.append(generator.generate(dataset.house_seed(0, "train", i), dataset.house_id("train", i)))
             i += 1
     return [(h, mujoco.MjModel.from_xml_string(mjcf.to_xml(h))) for h in out]
 
@@ -42,13 +42,13 @@ def _agent_qpos(model):
 
 
 def test_same_seed_same_house_and_bytes():
-    a, b = houses.generate(123, "h"), houses.generate(123, "h")
+    a, b = generator.generate(123, "h"), generator.generate(123, "h")
     assert a.to_json() == b.to_json()
     assert mjcf.to_xml(a) == mjcf.to_xml(b)
 
 
 def test_different_seeds_differ():
-    a, b = houses.generate(1, "h"), houses.generate(2, "h")
+    a, b = generator.generate(1, "h"), generator.generate(2, "h")
     assert a.to_json()["rooms"] != b.to_json()["rooms"]
     assert mjcf.to_xml(a) != mjcf.to_xml(b)
 
@@ -141,7 +141,7 @@ def test_furniture_stands_on_the_floor_and_stays_out_of_walls(house_set):
             if it.footprint is None or it.room_type == "outdoor":
                 continue
             for w in house.walls:
-                assert not houses._overlap(it.footprint, w.rect, -0.005), (house.id, it.key, w)
+                assert not furnish._overlap(it.footprint, w.rect, -0.005), (house.id, it.key, w)
 
 
 def test_json_round_trip(house_set):

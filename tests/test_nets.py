@@ -1,10 +1,11 @@
-"""Tests of leaps_mj.nets: shapes, step/sequence equivalence, checkpoints."""
+"""Tests of leaps_mj.learning.nets: shapes, step/sequence equivalence, checkpoints."""
 
 import numpy as np
 import pytest
 import torch
 
-from leaps_mj import nets, rooms
+from leaps_mj.learning import nets
+from leaps_mj.world import rooms
 
 W, H = 40, 30
 K = rooms.NUM_ROOM_TYPES

@@ -1,11 +1,13 @@
-"""Tests of leaps_mj.policies: the learned sub-policy behind the SubPolicy interface."""
+"""Tests of leaps_mj.learning.policies: the learned sub-policy behind the SubPolicy interface."""
 
 import numpy as np
 import pytest
 import torch
 
 import leaps_mj
-from leaps_mj import agents, nets, policies, rooms
+from leaps_mj.learning import nets, policies
+from leaps_mj.planning import agents
+from leaps_mj.world import rooms
 
 W, H = 24, 18
 
@@ -140,7 +142,7 @@ def test_load_default_loads_the_shipped_policies(tiny_dataset):
 def test_seed_restarts_the_sampler():
     import torch
 
-    from leaps_mj import policies
+    from leaps_mj.learning import policies
 
     sub = policies.load_default()
     sub.seed(5)

@@ -1,11 +1,15 @@
 """Tests for prior learning by random exploration and the observation-noise search."""
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from leaps_mj import rooms, semantic, train_prior, tune_obs_noise
+from leaps_mj.evaluation import tune_obs_noise
+from leaps_mj.learning import train_prior
+from leaps_mj.planning import semantic
+from leaps_mj.world import rooms
 
 
 def test_count_run_counts_present_pairs_from_the_start_node():
@@ -37,17 +41,27 @@ def test_tiny_preset_end_to_end_and_resume(tiny_dataset, tmp_path, capsys):
     assert (model.psi_obs0, model.psi_obs1) == (semantic.PAPER_PSI_OBS0, semantic.PAPER_PSI_OBS1)
     off = model.prior[~np.eye(9, dtype=bool)]
     assert off.min() >= 1e-4 and off.max() <= 1 - 1e-4 and np.ptp(off) > 0.1
-    assert len(list((out / "counts").glob("*.json"))) == 3
+    state = json.loads((out / "state.json").read_text())
+    assert state["house"] == 3 and state["train_config"]["trials"] == 2
     assert (out / "prior.png").stat().st_size > 10_000
     first = (out / "prior.json").read_text()
     assert train_prior.main(argv) == 0
     assert "(3 resumed" in capsys.readouterr().out
     assert (out / "prior.json").read_text() == first
-    # Counts made with other settings are not reused.
-    record = json.loads(next((out / "counts").glob("*.json")).read_text())
-    assert record["config"] == {"trials": 2, "steps": 300, "seed": 0}
-    assert train_prior.main(argv + ["--trials", "1"]) == 0
-    assert "(0 resumed" in capsys.readouterr().out
+    # A run under other settings in the same folder is refused, naming the difference.
+    with pytest.raises(ValueError, match="trials: saved 2, given 1"):
+        train_prior.main(argv + ["--trials", "1"])
+
+
+def test_killed_prior_run_resumes_to_the_same_counts(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_prior.PRESETS["tiny"], dataset=str(tiny_dataset))
+    whole = train_prior.learn(config, tmp_path / "whole", progress=False)
+    part = train_prior.Trainer(config, tmp_path / "parts", progress=False)
+    part.train(stop_after=1)
+    assert part.iteration == 1 and not part.finished
+    rest = train_prior.learn(config, tmp_path / "parts", progress=False)
+    assert rest["resumed"] == 1
+    assert (rest["pos"] == whole["pos"]).all() and (rest["trials"] == whole["trials"]).all()
 
 
 def test_choose_prefers_the_best_then_the_paper_values():

@@ -9,7 +9,11 @@ from mcap.writer import Writer
 from mcap_protobuf.decoder import DecoderFactory
 
 import leaps_mj
-from leaps_mj import episodes, expert, record, replay, rooms, semantic, topdown
+from leaps_mj.environment import episodes, expert
+from leaps_mj.planning import semantic
+from leaps_mj.records import recorder as record
+from leaps_mj.records import replay
+from leaps_mj.world import rooms, topdown
 
 HORIZON = 25
 

@@ -7,8 +7,9 @@ import matplotlib.figure
 import numpy as np
 import pytest
 
-from leaps_mj import rooms, semantic
-from leaps_mj.semantic import SemanticModel
+from leaps_mj.planning import semantic
+from leaps_mj.planning.semantic import SemanticModel
+from leaps_mj.world import rooms
 
 PSI0, PSI1 = semantic.PAPER_PSI_OBS0, semantic.PAPER_PSI_OBS1
 N = semantic.NUM_NODES

@@ -1,4 +1,4 @@
-"""Tests of leaps_mj.train_policy: returns, losses, tiny training runs, resume."""
+"""Tests of leaps_mj.learning.train_policy: returns, losses, tiny training runs, resume."""
 
 import dataclasses
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from leaps_mj import nets, train_policy
+from leaps_mj.learning import losses, nets, policy_eval, train_policy
 
 
 def tiny(dataset, **overrides):
@@ -23,7 +23,7 @@ def test_n_step_returns_hand_example():
     discounts = np.array([[0.5, 0.5], [0.0, 0.5], [0.0, 0.5]])
     next_values = np.array([[99.0, 4.0], [99.0, 6.0], [99.0, 8.0]])
     bootstrap = np.array([[False, True], [True, False], [True, True]])
-    got = train_policy.n_step_returns(rewards, discounts, next_values, bootstrap)
+    got = losses.n_step_returns(rewards, discounts, next_values, bootstrap)
     r1_env1 = 1.0 + 0.5 * 8.0  # step 2 bootstraps from V(s_3) = 8
     want = np.array([
         [1.0 + 0.5 * 10.0, 2.0 + 0.5 * 4.0],
@@ -36,7 +36,7 @@ def test_n_step_returns_hand_example():
 def test_n_step_returns_requires_final_bootstrap():
     z = np.zeros((2, 1))
     with pytest.raises(ValueError, match="bootstrap"):
-        train_policy.n_step_returns(z, z, z, np.zeros((2, 1), bool))
+        losses.n_step_returns(z, z, z, np.zeros((2, 1), bool))
 
 
 def test_a2c_loss_masks_invalid_steps_and_normalises():
@@ -48,7 +48,7 @@ def test_a2c_loss_masks_invalid_steps_and_normalises():
     returns = torch.randn(4, 3)
     valid = torch.ones(4, 3)
     valid[2, 1] = 0.0
-    loss, scalars = train_policy.a2c_loss(logits, values, actions, returns, valid, config)
+    loss, scalars = losses.a2c_loss(logits, values, actions, returns, valid, config)
     loss.backward()
     assert torch.isfinite(loss)
     assert logits.grad[2, 1].abs().sum() == 0 and values.grad[2, 1] == 0
@@ -56,14 +56,14 @@ def test_a2c_loss_masks_invalid_steps_and_normalises():
     # Changing an invalid step's return changes nothing.
     returns2 = returns.clone()
     returns2[2, 1] = 1e6
-    loss2, _ = train_policy.a2c_loss(logits, values, actions, returns2, valid, config)
+    loss2, _ = losses.a2c_loss(logits, values, actions, returns2, valid, config)
     assert torch.allclose(loss, loss2)
 
 
 def test_bc_loss_is_cross_entropy_and_accuracy():
     logits = torch.tensor([[[5.0] + [0.0] * 8, [0.0] * 8 + [5.0]]])  # (T=1, B=2, 9)
     labels = torch.tensor([[0, 3]])
-    ce, acc = train_policy.bc_loss(logits, labels, torch.ones(1, 2))
+    ce, acc = losses.bc_loss(logits, labels, torch.ones(1, 2))
     want = (torch.nn.functional.cross_entropy(logits[0], labels[0], reduction="none")).mean()
     assert torch.isclose(ce, want) and acc == 0.5
 
@@ -110,7 +110,7 @@ def resumed_run(tiny_dataset, tmp_path_factory):
     assert killed.iteration == 3
     # A kill after iteration 3 was logged but before its checkpoint: the state says 2.
     nets.save_checkpoint(killed.state_path, killed.model, killed.model.config,
-                         {**killed._extra(), "iteration": 2, "global_step": 2 * config.batch,
+                         {**killed.extra(), "iteration": 2, "global_step": 2 * config.batch,
                           "optimizer": killed.optimizer.state_dict()})
     loaded = train_policy.Trainer(config, "kitchen", out, progress=False)
     assert train_policy.main(argv) == 0
@@ -125,7 +125,7 @@ def test_resume_continues_the_same_config_and_counters(resumed_run):
     assert loaded.optimizer.state_dict()["state"], "optimizer state restored"
     final = train_policy.Trainer(config, "kitchen", out, progress=False)
     assert final.finished and final.iteration == config.iterations == 6
-    log = train_policy.read_progress(out / "kitchen" / "progress.csv")
+    log = policy_eval.read_progress(out / "kitchen" / "progress.csv")
     assert list(log["iteration"]) == [1, 2, 3, 4, 5, 6]  # the uncheckpointed row 3 was redone once
     with pytest.raises(ValueError, match="lr: saved"):
         train_policy.Trainer(dataclasses.replace(config, lr=0.5), "kitchen", out, progress=False)
@@ -133,7 +133,7 @@ def test_resume_continues_the_same_config_and_counters(resumed_run):
 
 def test_training_losses_are_finite_in_both_phases(resumed_run):
     _, out, _, _ = resumed_run
-    log = train_policy.read_progress(out / "kitchen" / "progress.csv")
+    log = policy_eval.read_progress(out / "kitchen" / "progress.csv")
     assert list(log["phase"]) == ["dagger"] * 3 + ["a2c"] * 3
     assert np.isfinite(log["bc_cross_entropy"][:3]).all() and np.isfinite(log["policy_loss"][3:]).all()
     assert np.isfinite(log["value_loss"]).all() and np.isfinite(log["entropy"][3:]).all()
@@ -152,7 +152,8 @@ def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
 
 def test_mu_s_training_stores_and_feeds_the_bits(tiny_dataset, tmp_path):
     """A tiny μ_s run: unrolls carry bits and target, both phases train, the result loads as μ_s."""
-    from leaps_mj import policies, rooms
+    from leaps_mj.learning import policies
+    from leaps_mj.world import rooms
 
     config = tiny(tiny_dataset, total_steps=4 * 16, dagger_fraction=0.5, use_semantic=True)
     trainer = train_policy.Trainer(config, "kitchen", tmp_path, progress=False)
@@ -167,14 +168,14 @@ def test_mu_s_training_stores_and_feeds_the_bits(tiny_dataset, tmp_path):
         np.testing.assert_array_equal(unroll.target[..., rooms.room_index("kitchen")], 1)
         assert unroll.target.sum() == T * B
     assert any(u.semantic.any() for u in unrolls), "agents in typed rooms see bits"
-    log = train_policy.read_progress(tmp_path / "kitchen" / "progress.csv")
+    log = policy_eval.read_progress(tmp_path / "kitchen" / "progress.csv")
     assert np.isfinite(log["bc_cross_entropy"][:2]).all() and np.isfinite(log["policy_loss"][2:]).all()
     policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",), use_semantic=True)
     assert policy.nets["kitchen"].config.use_semantic
 
 
 def test_parse_targets():
-    from leaps_mj import rooms
+    from leaps_mj.world import rooms
 
     assert train_policy.parse_targets("all", False) == rooms.GRAPH_NODES
     assert train_policy.parse_targets("all", True) == rooms.ROOM_TYPES

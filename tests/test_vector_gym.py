@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from leaps_mj import vector
+from leaps_mj.environment import vector
 
 
 def test_vector_env_steps_in_workers_and_forwards_errors(tiny_dataset):

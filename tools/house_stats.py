@@ -17,7 +17,8 @@ import sys
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))
 
 import leaps_mj  # noqa: E402,F401
-from leaps_mj import dataset, house_stats, houses  # noqa: E402
+from leaps_mj.world import dataset, houses  # noqa: E402
+from leaps_mj.world import stats as house_stats
 
 
 def main(argv=None) -> int:

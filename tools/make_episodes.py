@@ -8,7 +8,7 @@ import argparse
 import sys
 import time
 
-from leaps_mj import episodes
+from leaps_mj.environment import episodes
 
 
 def main(argv=None) -> int:

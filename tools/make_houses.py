@@ -17,7 +17,7 @@ import time
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))
 
 import leaps_mj  # noqa: E402,F401  (sets MUJOCO_GL before anything imports dm_control)
-from leaps_mj import dataset  # noqa: E402
+from leaps_mj.world import dataset  # noqa: E402
 
 
 def _int_at_least(minimum: int, what: str):

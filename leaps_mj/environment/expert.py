@@ -1,0 +1,161 @@
+"""The geodesic expert: walks the shortest path with the 9 discrete actions.
+
+It reads privileged state (the house's navigation grid, the agent's pose and
+the task's target-pixel fraction), so it is an oracle: proof that every
+episode is solvable and that the success test can be met, the teacher for
+imitation warm starts, and (restricted to nearby targets) the "local expert"
+sub-policy of the LEAPS evaluation.
+
+Steering: the next waypoint is found by descending the geodesic distance
+field for ``lookahead`` metres from the agent's cell; the agent turns (30° or
+15°) until it faces the waypoint within ``_FACE_TOL`` and then moves forward.
+Inside the target room it heads for a viewing zone near that room's
+"see" objects, turns to face the nearest one and stays while the success test
+holds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.ndimage
+
+from leaps_mj.world import navgrid, rooms
+
+FORWARD, LEFT, RIGHT = 0, 3, 4
+SMALL_FORWARD, SMALL_LEFT, SMALL_RIGHT, STAY = 5, 6, 7, 8
+_FACE_TOL = math.radians(16)
+_VIEW_RADIUS = 2.2  # metres from a see-object within which the agent looks at it
+_SAFE_RADIUS = 0.35  # clearance of the expert's paths (the agent's radius is 0.2)
+
+
+def _turn(err: float) -> int:
+    """Rotation action reducing a heading error (radians, left positive)."""
+    if abs(err) > math.radians(22.5):
+        return LEFT if err > 0 else RIGHT
+    return SMALL_LEFT if err > 0 else SMALL_RIGHT
+
+
+class GeodesicExpert:
+    """Shortest-path oracle for a :class:`leaps_mj.environment.roomnav.RoomNavEnvironment`.
+
+    Args:
+      env: the environment whose current episode it solves.
+      seed: seed of the small random moves it makes when blocked.
+      lookahead: metres of path ahead used as the steering waypoint.
+    """
+
+    def __init__(self, env, seed: int = 0, lookahead: float = 0.6):
+        self.env = env
+        self.rng = np.random.default_rng(seed)
+        self.lookahead = lookahead
+        self._safe: dict[str, navgrid.NavGrid] = {}
+        self._fields: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def reset(self) -> None:
+        """Nothing to forget between episodes beyond the per-house cache."""
+
+    def _safe_grid(self, hm):
+        """The house's grid at a wider radius: paths keep off walls and corners."""
+        key = hm.house.id
+        if key not in self._safe:
+            self._safe[key] = navgrid.NavGrid(hm.house, radius=_SAFE_RADIUS)
+        return self._safe[key]
+
+    def field(self, target: str, view: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Steering field towards ``target`` (its viewing zone when ``view``).
+
+        Returns:
+          (distance field on the wide-clearance grid, index arrays of each
+          cell's nearest cell where that field is finite, see-object xy array).
+        """
+        hm = self.env.task.house_model
+        key = (hm.house.id, target, view)
+        if key not in self._fields:
+            grid = hm.grid
+            goal_rooms = {r.id for r in hm.house.rooms if r.type == target}
+            see = set(rooms.SEE_OBJECTS.get(target, ()))
+            pts = np.array([g.pos[:2] for it in hm.house.items if it.room in goal_rooms
+                            for g in it.geoms if g.cls in see]).reshape(-1, 2)
+            zone = grid.room_mask(target)
+            if view and len(pts):
+                xs, ys = grid.cell_centers()
+                near = np.zeros(grid.shape, dtype=bool)
+                for px, py in pts:
+                    near |= np.hypot(xs - px, ys - py) <= _VIEW_RADIUS
+                if (zone & near).any():
+                    zone = zone & near
+            safe = self._safe_grid(hm)
+            dist = safe.distance_from(zone)
+            if not np.isfinite(dist).any():
+                dist = grid.distance_from(zone)
+            finite = np.isfinite(dist)
+            _, nearest = scipy.ndimage.distance_transform_edt(~finite, return_indices=True)
+            self._fields[key] = (dist, nearest, pts)
+        return self._fields[key]
+
+    def waypoint(self, field: np.ndarray, nearest: np.ndarray, xy) -> np.ndarray | None:
+        """A point ``lookahead`` metres down ``field`` from ``xy``; None at the goal.
+
+        Off the field (too near a wall for the wide-clearance grid) the
+        waypoint is the nearest cell on it, which leads away from the wall.
+        """
+        grid = self.env.task.house_model.grid
+        i, j = grid.to_cell(xy)
+        if not np.isfinite(field[i, j]):
+            i, j = int(nearest[0, i, j]), int(nearest[1, i, j])
+            wp = grid.to_world((i, j))
+            if np.hypot(*(wp - np.asarray(xy[:2]))) > 0.15:
+                return wp
+        if field[i, j] == 0:
+            return None
+        for _ in range(int(self.lookahead / grid.cell)):
+            best = (field[i, j], i, j)
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    a, b = i + di, j + dj
+                    if 0 <= a < grid.shape[0] and 0 <= b < grid.shape[1] and field[a, b] < best[0]:
+                        best = (field[a, b], a, b)
+            if best[1:] == (i, j):
+                break
+            _, i, j = best
+        return grid.to_world((i, j))
+
+    def step_towards(self, target: str, view: bool, pose) -> int | None:
+        """Action that follows the field to ``target`` from ``pose``; None at its goal."""
+        task = self.env.task
+        field, nearest, _ = self.field(target, view)
+        wp = self.waypoint(field, nearest, pose[:2])
+        if wp is None:
+            return None
+        if task.collision and self.rng.random() < 0.5:
+            return int(self.rng.choice([LEFT, RIGHT, SMALL_FORWARD]))
+        err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - pose[2], 2 * math.pi)
+        if abs(err) > _FACE_TOL:
+            return _turn(err)
+        return FORWARD if np.hypot(*(wp - pose[:2])) > 0.45 else SMALL_FORWARD
+
+    def act(self, timestep=None) -> int:
+        """The expert's action for the environment's current state."""
+        del timestep
+        task = self.env.task
+        pose = self.env.physics.agent_pose()
+        target = task.episode.target
+        if task.sees():
+            return STAY
+        if not rooms.SEE_OBJECTS.get(target):  # outdoor, indoor: being there suffices
+            return self.step_towards(target, False, pose) or FORWARD
+        action = self.step_towards(target, True, pose)
+        if action is not None:
+            return action
+        # In the viewing zone: face the nearest see-object, step closer if aligned.
+        pts = self.field(target, True)[2]
+        if not len(pts):
+            return LEFT
+        d = np.hypot(pts[:, 0] - pose[0], pts[:, 1] - pose[1])
+        px, py = pts[int(np.argmin(d))]
+        err = math.remainder(math.atan2(py - pose[1], px - pose[0]) - pose[2], 2 * math.pi)
+        if abs(err) > math.radians(10):
+            return _turn(err)
+        return SMALL_FORWARD if d.min() > 1.0 else int(self.rng.choice([SMALL_LEFT, SMALL_RIGHT]))

@@ -1,0 +1,625 @@
+"""Neural networks of LEAPS and its baselines, and their checkpoints.
+
+Three networks, each built from a frozen config dataclass:
+
+* :class:`ActorCritic` — the sub-policy μ(θ) of the paper: a CNN over the
+  segmentation + depth frame, a linear layer, an LSTM and policy / value
+  heads, trained with A2C/A3C on ``t_max``-step unrolls. With
+  ``PolicyConfig(use_semantic=True)`` it is the semantic-augmented policy μ_s,
+  which also sees the room-type bits and the target one-hot.
+* :class:`RoomClassifier` — predicts the K room-type bits from 4 views with a
+  shared per-view CNN and a learned attention over the views.
+* :class:`ControllerNet` — the LSTM controller of the HRL baseline, choosing
+  the next sub-target room type from semantic bits.
+
+Observations follow the environment's keys, batched: ``segmentation`` int
+(B, H, W) class ids in ``[0, NUM_SEG_CLASSES)``, ``depth`` float (B, H, W) in
+metres, ``semantic`` (B, K) room-type bits and ``target`` (B, K) one-hot.
+:meth:`ActorCritic.preprocess` turns the numpy observations into tensors.
+
+:func:`save_checkpoint` / :func:`load_policy` store a network with its config,
+the segmentation class table and the resolution, so a policy trained at one
+resolution or with another class table is refused at load time rather than
+producing silent garbage.
+"""
+
+import dataclasses
+import math
+import os
+import pathlib
+import tempfile
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from leaps_mj.world import rooms
+
+#: Tag stored in every checkpoint, checked on load.
+CHECKPOINT_FORMAT = "leaps_mj.nets/1"
+
+#: (h, c) of an LSTM, each (B, units).
+State = tuple[torch.Tensor, torch.Tensor]
+
+
+def _check_positive(name: str, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+        raise ValueError(f"{name} must be a positive int, got {value!r}")
+
+
+def _check_positive_tuple(name: str, values: tuple) -> None:
+    if not values:
+        raise ValueError(f"{name} must not be empty")
+    for i, value in enumerate(values):
+        _check_positive(f"{name}[{i}]", value)
+
+
+def _check_pixels(config: Any) -> None:
+    """Checks the fields shared by the pixel-input configs."""
+    _check_positive("width", config.width)
+    _check_positive("height", config.height)
+    _check_positive("num_classes", config.num_classes)
+    if isinstance(config.seg_embed, bool) or not isinstance(config.seg_embed, int) or config.seg_embed < 0:
+        raise ValueError(f"seg_embed must be an int >= 0 (0 = one-hot), got {config.seg_embed!r}")
+    if not config.max_depth > 0 or not math.isfinite(config.max_depth):
+        raise ValueError(f"max_depth must be a positive finite number of metres, got {config.max_depth!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class PolicyConfig:
+    """Architecture of the CNN+LSTM actor-critic (defaults: the paper's).
+
+    Attributes:
+      width: Frame width in pixels (paper 120).
+      height: Frame height in pixels (paper 90).
+      conv_channels: Output channels of each conv layer.
+      kernel: Conv kernel size; padding ``kernel // 2`` keeps small frames usable.
+      stride: Conv stride of every layer.
+      hidden: Units of the linear layer after the conv stack.
+      lstm: LSTM units.
+      seg_embed: Segmentation encoding. 0 feeds a one-hot plane per class;
+        a positive value feeds a learned ``nn.Embedding`` of that dimension.
+        The default 8 is equivalent to a 1x1 conv on the one-hot planes but
+        makes the first conv 4x cheaper than one-hot over 35 classes.
+      max_depth: Depth is clipped to ``[0, max_depth]`` metres and scaled to [0, 1].
+      use_semantic: The semantic-augmented policy μ_s: concatenate the
+        room-type bits and the target one-hot to the features before the LSTM.
+      num_classes: Number of segmentation classes.
+      num_actions: Number of discrete actions.
+    """
+
+    width: int = 120
+    height: int = 90
+    conv_channels: tuple[int, ...] = (64, 64, 128, 128)
+    kernel: int = 5
+    stride: int = 2
+    hidden: int = 256
+    lstm: int = 256
+    seg_embed: int = 8
+    max_depth: float = 10.0
+    use_semantic: bool = False
+    num_classes: int = rooms.NUM_SEG_CLASSES
+    num_actions: int = rooms.NUM_ACTIONS
+
+    def __post_init__(self):
+        object.__setattr__(self, "conv_channels", tuple(self.conv_channels))
+        _check_pixels(self)
+        _check_positive_tuple("conv_channels", self.conv_channels)
+        for name in ("kernel", "stride", "hidden", "lstm", "num_actions"):
+            _check_positive(name, getattr(self, name))
+        if not isinstance(self.use_semantic, bool):
+            raise ValueError(f"use_semantic must be a bool, got {self.use_semantic!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class RoomClassifierConfig:
+    """Architecture of the multi-view room classifier (defaults: the paper's).
+
+    Attributes:
+      width: View width in pixels.
+      height: View height in pixels.
+      channels: Output channels of each 3x3 conv layer (each followed by
+        BatchNorm and ReLU).
+      strides: Stride of each conv layer; same length as ``channels``.
+      kernel: Conv kernel size.
+      mlp_hidden: Hidden units of the output MLP.
+      num_views: Views per sample (4 panoramic views, or the last 4 frames
+        for outdoor).
+      seg_embed: Segmentation encoding, as in :class:`PolicyConfig`.
+      max_depth: Depth clip and scale, as in :class:`PolicyConfig`.
+      num_classes: Number of segmentation classes.
+      num_room_types: Outputs: one sigmoid logit per room type.
+    """
+
+    width: int = 120
+    height: int = 90
+    channels: tuple[int, ...] = (4, 8, 16, 16, 32, 32, 64, 64, 128, 256)
+    strides: tuple[int, ...] = (1, 1, 1, 2, 1, 2, 1, 2, 1, 2)
+    kernel: int = 3
+    mlp_hidden: int = 32
+    num_views: int = 4
+    seg_embed: int = 8
+    max_depth: float = 10.0
+    num_classes: int = rooms.NUM_SEG_CLASSES
+    num_room_types: int = rooms.NUM_ROOM_TYPES
+
+    def __post_init__(self):
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "strides", tuple(self.strides))
+        _check_pixels(self)
+        _check_positive_tuple("channels", self.channels)
+        _check_positive_tuple("strides", self.strides)
+        if len(self.channels) != len(self.strides):
+            raise ValueError(
+                f"channels ({len(self.channels)} layers) and strides "
+                f"({len(self.strides)} layers) must have the same length"
+            )
+        for name in ("kernel", "mlp_hidden", "num_views", "num_room_types"):
+            _check_positive(name, getattr(self, name))
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerConfig:
+    """Architecture of the HRL baseline's LSTM controller.
+
+    Attributes:
+      num_room_types: K; the input is 4K floats and the output K sub-targets.
+      lstm: LSTM units (50 in the original release).
+    """
+
+    num_room_types: int = rooms.NUM_ROOM_TYPES
+    lstm: int = 50
+
+    def __post_init__(self):
+        _check_positive("num_room_types", self.num_room_types)
+        _check_positive("lstm", self.lstm)
+
+
+def _layer_init(layer: nn.Module, std: float = math.sqrt(2.0)) -> nn.Module:
+    """Orthogonal weights and zero bias, the usual actor-critic initialisation."""
+    nn.init.orthogonal_(layer.weight, std)
+    if layer.bias is not None:
+        nn.init.zeros_(layer.bias)
+    return layer
+
+
+def _lstm_cell(inputs: int, units: int) -> nn.LSTMCell:
+    cell = nn.LSTMCell(inputs, units)
+    for name, param in cell.named_parameters():
+        if "weight" in name:
+            nn.init.orthogonal_(param, 1.0)
+        else:
+            nn.init.zeros_(param)
+    return cell
+
+
+def _reset(state: State, done: torch.Tensor | None) -> State:
+    """Zeroes the state rows whose ``done`` is 1 (an episode began there)."""
+    if done is None:
+        return state
+    keep = (1.0 - done.to(state[0].dtype)).unsqueeze(-1)
+    return state[0] * keep, state[1] * keep
+
+
+class _Net(nn.Module):
+    """Base of the networks here; each also has a ``config`` attribute."""
+
+    def num_parameters(self) -> int:
+        """Number of trainable parameters."""
+        return sum(p.numel() for p in self.parameters() if p.requires_grad)
+
+
+class _PixelInput(nn.Module):
+    """Turns segmentation ids + depth into conv input planes (N, C, H, W).
+
+    Segmentation becomes ``seg_embed`` learned planes (or one-hot planes when
+    ``seg_embed`` is 0); depth becomes one plane clipped and scaled to [0, 1].
+    """
+
+    def __init__(self, num_classes: int, seg_embed: int, max_depth: float):
+        super().__init__()
+        self.num_classes = num_classes
+        self.max_depth = max_depth
+        self.embed = nn.Embedding(num_classes, seg_embed) if seg_embed else None
+        self.channels = (seg_embed or num_classes) + 1
+
+    def forward(self, seg: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        seg = seg.long()
+        if self.embed is None:
+            planes = F.one_hot(seg, self.num_classes).float()
+        else:
+            planes = self.embed(seg)
+        depth = depth.float().clamp(0.0, self.max_depth) / self.max_depth
+        return torch.cat([planes.permute(0, 3, 1, 2), depth.unsqueeze(1)], dim=1)
+
+
+def _check_frames(name: str, tensor: torch.Tensor, width: int, height: int, lead: int) -> None:
+    """Checks that ``tensor`` is ``lead`` leading dims followed by (height, width)."""
+    if tensor.dim() != lead + 2 or tuple(tensor.shape[-2:]) != (height, width):
+        raise ValueError(
+            f"{name} has shape {tuple(tensor.shape)}; expected {lead} leading dim(s) then "
+            f"(height, width) = ({height}, {width}) for a net built for {width}x{height}"
+        )
+
+
+def _require_keys(obs: Mapping[str, Any], keys: tuple[str, ...]) -> None:
+    missing = [k for k in keys if k not in obs]
+    if missing:
+        raise ValueError(f"observation lacks {missing}; it has {sorted(obs)}")
+
+
+class ActorCritic(_Net):
+    """CNN + LSTM actor-critic over segmentation + depth (the sub-policy μ(θ)).
+
+    conv stack -> Linear(hidden) -> ReLU -> [+ semantic bits, target one-hot
+    when ``use_semantic``] -> LSTMCell(lstm) -> policy logits and value.
+
+    The LSTM runs step by step (an ``LSTMCell``) so that :meth:`forward` and
+    :meth:`forward_sequence` compute the same function and episode boundaries
+    inside an unroll reset the state exactly where they occur.
+    """
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.config = config
+        self.pixels = _PixelInput(config.num_classes, config.seg_embed, config.max_depth)
+        layers = []
+        in_channels = self.pixels.channels
+        for channels in config.conv_channels:
+            layers += [
+                _layer_init(nn.Conv2d(in_channels, channels, config.kernel, config.stride, config.kernel // 2)),
+                nn.ReLU(),
+            ]
+            in_channels = channels
+        self.conv = nn.Sequential(*layers, nn.Flatten())
+        with torch.no_grad():
+            dummy = torch.zeros(1, self.pixels.channels, config.height, config.width)
+            flat = self.conv(dummy).shape[1]
+        self.fc = nn.Sequential(_layer_init(nn.Linear(flat, config.hidden)), nn.ReLU())
+        lstm_in = config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0)
+        self.lstm = _lstm_cell(lstm_in, config.lstm)
+        self.policy = _layer_init(nn.Linear(config.lstm, config.num_actions), std=0.01)
+        self.value = _layer_init(nn.Linear(config.lstm, 1), std=1.0)
+
+    @staticmethod
+    def preprocess(
+        obs: Mapping[str, np.ndarray], device: torch.device | str | None = None
+    ) -> dict[str, torch.Tensor]:
+        """Converts numpy observations to tensors of the dtypes the net takes.
+
+        Shapes are kept, so both (B, ...) and (T, B, ...) batches work. Keys
+        other than ``segmentation``, ``depth``, ``semantic`` and ``target``
+        are dropped.
+
+        Raises:
+          ValueError: if a segmentation id is outside ``[0, NUM_SEG_CLASSES)``.
+        """
+        out = {}
+        if "segmentation" in obs:
+            seg = np.asarray(obs["segmentation"])
+            if seg.size and (seg.min() < 0 or seg.max() >= rooms.NUM_SEG_CLASSES):
+                raise ValueError(
+                    f"segmentation ids span [{seg.min()}, {seg.max()}]; "
+                    f"expected [0, {rooms.NUM_SEG_CLASSES})"
+                )
+            out["segmentation"] = torch.as_tensor(seg, dtype=torch.long, device=device)
+        for key in ("depth", "semantic", "target"):
+            if key in obs:
+                out[key] = torch.as_tensor(np.asarray(obs[key]), dtype=torch.float32, device=device)
+        return out
+
+    def initial_state(self, batch: int, device: torch.device | str | None = None) -> State:
+        """Zero LSTM state (h, c), each (batch, lstm)."""
+        zeros = torch.zeros(batch, self.config.lstm, device=device)
+        return zeros, zeros.clone()
+
+    def _features(self, obs: Mapping[str, torch.Tensor], lead: int) -> torch.Tensor:
+        """LSTM inputs for observations with ``lead`` leading dims, flattened to (N, F)."""
+        cfg = self.config
+        keys = ("segmentation", "depth") + (("semantic", "target") if cfg.use_semantic else ())
+        _require_keys(obs, keys)
+        seg, depth = obs["segmentation"], obs["depth"]
+        _check_frames("segmentation", seg, cfg.width, cfg.height, lead)
+        _check_frames("depth", depth, cfg.width, cfg.height, lead)
+        x = self.pixels(seg.reshape(-1, cfg.height, cfg.width), depth.reshape(-1, cfg.height, cfg.width))
+        x = self.fc(self.conv(x))
+        if cfg.use_semantic:
+            expected = tuple(seg.shape[:lead]) + (rooms.NUM_ROOM_TYPES,)
+            for key in ("semantic", "target"):
+                if tuple(obs[key].shape) != expected:
+                    raise ValueError(f"{key} has shape {tuple(obs[key].shape)}; expected {expected}")
+            x = torch.cat([x, *(obs[k].float().reshape(x.shape[0], -1) for k in ("semantic", "target"))], dim=1)
+        return x
+
+    def _heads(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.policy(h), self.value(h).squeeze(-1)
+
+    def forward(
+        self,
+        obs: Mapping[str, torch.Tensor],
+        state: State,
+        done_mask: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, State]:
+        """One time step.
+
+        Args:
+          obs: Tensors with a leading batch dim (B, ...).
+          state: (h, c) from :meth:`initial_state` or the previous step.
+          done_mask: Optional (B,) float; 1 where an episode began at this
+            step, whose state rows are zeroed before the step.
+
+        Returns:
+          logits (B, num_actions), value (B,), new state.
+        """
+        x = self._features(obs, lead=1)
+        h, c = self.lstm(x, _reset(state, done_mask))
+        logits, value = self._heads(h)
+        return logits, value, (h, c)
+
+    def forward_sequence(
+        self,
+        obs: Mapping[str, torch.Tensor],
+        state: State,
+        dones: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor, State]:
+        """An unroll of T steps (e.g. A2C's ``t_max`` = 30).
+
+        The CNN runs on all T*B frames at once; the LSTM steps through time,
+        resetting rows where ``dones[t]`` is 1 before step t — the same result
+        as calling :meth:`forward` T times.
+
+        Args:
+          obs: Tensors with leading (T, B) dims.
+          state: (h, c) at the start of the unroll.
+          dones: (T, B) float; 1 where an episode began at that step.
+
+        Returns:
+          logits (T, B, num_actions), values (T, B), state after the last step.
+        """
+        x = self._features(obs, lead=2)
+        steps, batch = obs["segmentation"].shape[:2]
+        if tuple(dones.shape) != (steps, batch):
+            raise ValueError(f"dones has shape {tuple(dones.shape)}; expected (T, B) = ({steps}, {batch})")
+        x = x.reshape(steps, batch, -1)
+        hs = []
+        for t in range(steps):
+            state = self.lstm(x[t], _reset(state, dones[t]))
+            hs.append(state[0])
+        logits, values = self._heads(torch.stack(hs))
+        return logits, values, state
+
+
+class RoomClassifier(_Net):
+    """Predicts the room-type bits from several views with attention over views.
+
+    Each view goes through the same CNN (3x3 conv + BatchNorm + ReLU per
+    layer, then global average pooling). A linear layer scores each view's
+    feature, a softmax over views turns scores into weights, and the weighted
+    sum of features feeds an MLP giving one sigmoid logit per room type.
+    Global pooling makes the net work at any view resolution.
+    """
+
+    def __init__(self, config: RoomClassifierConfig):
+        super().__init__()
+        self.config = config
+        self.pixels = _PixelInput(config.num_classes, config.seg_embed, config.max_depth)
+        layers = []
+        in_channels = self.pixels.channels
+        for channels, stride in zip(config.channels, config.strides):
+            layers += [
+                nn.Conv2d(in_channels, channels, config.kernel, stride, config.kernel // 2, bias=False),
+                nn.BatchNorm2d(channels),
+                nn.ReLU(),
+            ]
+            in_channels = channels
+        self.cnn = nn.Sequential(*layers, nn.AdaptiveAvgPool2d(1), nn.Flatten())
+        self.score = nn.Linear(in_channels, 1)
+        self.mlp = nn.Sequential(
+            nn.Linear(in_channels, config.mlp_hidden),
+            nn.ReLU(),
+            nn.Linear(config.mlp_hidden, config.num_room_types),
+        )
+
+    def attend(self, seg: torch.Tensor, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Attention-pooled feature (B, C) and the view weights (B, num_views)."""
+        cfg = self.config
+        for name, tensor in (("seg", seg), ("depth", depth)):
+            if tensor.dim() != 4 or tensor.shape[1] != cfg.num_views:
+                raise ValueError(
+                    f"{name} has shape {tuple(tensor.shape)}; expected (B, {cfg.num_views}, H, W)"
+                )
+        batch, views, height, width = seg.shape
+        if tuple(depth.shape) != tuple(seg.shape):
+            raise ValueError(f"depth shape {tuple(depth.shape)} differs from seg shape {tuple(seg.shape)}")
+        x = self.pixels(seg.reshape(-1, height, width), depth.reshape(-1, height, width))
+        features = self.cnn(x).reshape(batch, views, -1)
+        weights = torch.softmax(self.score(features).squeeze(-1), dim=1)
+        return (weights.unsqueeze(-1) * features).sum(dim=1), weights
+
+    def forward(self, seg: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        """Room-type logits (B, num_room_types) from seg (B, V, H, W) ids and depth (B, V, H, W) metres."""
+        pooled, _ = self.attend(seg, depth)
+        return self.mlp(pooled)
+
+
+class ControllerNet(_Net):
+    """LSTM controller of the HRL baseline: picks the next sub-target room type.
+
+    Input per step (4K floats): current room-type bits, OR-accumulated bits
+    since the episode began, target one-hot, last sub-target one-hot. Output:
+    logits over the K sub-targets and a value. With K = 8 and 50 units it has
+    17,259 parameters, against the 38 of the semantic model (36 edge
+    probabilities of the 9-node graph plus 2 observation-noise rates).
+    """
+
+    def __init__(self, config: ControllerConfig = ControllerConfig()):
+        super().__init__()
+        self.config = config
+        self.lstm = _lstm_cell(4 * config.num_room_types, config.lstm)
+        self.policy = _layer_init(nn.Linear(config.lstm, config.num_room_types), std=0.01)
+        self.value = _layer_init(nn.Linear(config.lstm, 1), std=1.0)
+
+    def initial_state(self, batch: int, device: torch.device | str | None = None) -> State:
+        """Zero LSTM state (h, c), each (batch, lstm)."""
+        zeros = torch.zeros(batch, self.config.lstm, device=device)
+        return zeros, zeros.clone()
+
+    def forward(
+        self, x: torch.Tensor, state: State, done_mask: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, State]:
+        """One option step: x (B, 4K) -> logits (B, K), value (B,), new state.
+
+        ``done_mask`` (B,) zeroes the state rows where an episode began.
+        """
+        expected = 4 * self.config.num_room_types
+        if x.dim() != 2 or x.shape[1] != expected:
+            raise ValueError(f"controller input has shape {tuple(x.shape)}; expected (B, {expected})")
+        h, c = self.lstm(x.float(), _reset(state, done_mask))
+        return self.policy(h), self.value(h).squeeze(-1), (h, c)
+
+
+#: Config class name -> (config class, network class), for loading.
+_NETS = {
+    "PolicyConfig": (PolicyConfig, ActorCritic),
+    "RoomClassifierConfig": (RoomClassifierConfig, RoomClassifier),
+    "ControllerConfig": (ControllerConfig, ControllerNet),
+}
+
+_PLAIN = (type(None), bool, int, float, str, torch.Tensor)
+
+
+def _check_plain(value: Any, where: str) -> None:
+    """Checks ``value`` holds only what ``torch.load(weights_only=True)`` reads back."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if not isinstance(key, (str, int)):
+                raise ValueError(f"{where} has key {key!r} of type {type(key).__name__}; use str or int keys")
+            _check_plain(item, f"{where}[{key!r}]")
+    elif isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            _check_plain(item, f"{where}[{i}]")
+    elif not isinstance(value, _PLAIN):
+        raise ValueError(
+            f"{where} is a {type(value).__name__}; checkpoints hold only None, bool, int, float, "
+            "str, tensors, lists, tuples and dicts (convert numpy values with .tolist() or torch.as_tensor)"
+        )
+
+
+def _resolution(config: Any) -> tuple[int, int] | None:
+    return (config.width, config.height) if hasattr(config, "width") else None
+
+
+def save_checkpoint(
+    path: str | os.PathLike, model: _Net, config: Any, extra: Mapping[str, Any] | None = None
+) -> None:
+    """Writes ``model`` with its config, the class table and resolution, atomically.
+
+    The file is written to a temporary file in the same directory and moved
+    into place with ``os.replace``, so a crash never leaves a half-written
+    checkpoint under ``path``. Parent directories are created.
+
+    Args:
+      path: Destination file.
+      model: An :class:`ActorCritic`, :class:`RoomClassifier` or :class:`ControllerNet`.
+      config: The model's config (must equal ``model.config``).
+      extra: Training metadata (step, target room, metrics...) made of plain
+        Python values and tensors.
+
+    Raises:
+      ValueError: if ``config`` is not the model's, or ``extra`` holds other types.
+    """
+    name = type(config).__name__
+    if name not in _NETS or not isinstance(model, _NETS[name][1]):
+        raise ValueError(f"cannot save a {type(model).__name__} with a {name}")
+    if config != model.config:
+        raise ValueError(f"config {config} differs from the model's {model.config}")
+    extra = dict(extra or {})
+    _check_plain(extra, "extra")
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "config_class": name,
+        "config": dataclasses.asdict(config),
+        "seg_classes": list(rooms.SEG_CLASSES),
+        "resolution": _resolution(config),
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "extra": extra,
+    }
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            torch.save(payload, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def load_policy(
+    path: str | os.PathLike,
+    expect_width: int | None = None,
+    expect_height: int | None = None,
+) -> tuple[_Net, Any, dict]:
+    """Loads a checkpoint written by :func:`save_checkpoint`.
+
+    Works for any of the three networks; the model comes back on the CPU in
+    eval mode (call ``.train()`` to resume training).
+
+    Args:
+      path: Checkpoint file.
+      expect_width: If given, the width the model must have been built for
+        (ignored for the controller, which takes no pixels).
+      expect_height: If given, the height the model must have been built for.
+
+    Returns:
+      (model, config, extra).
+
+    Raises:
+      ValueError: naming the file, if it is missing, unreadable or not a
+        leaps_mj checkpoint, if its class table differs from
+        ``rooms.SEG_CLASSES``, or if its resolution differs from the expected one.
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"checkpoint {path} does not exist")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # torch raises many types for a damaged file.
+        raise ValueError(
+            f"checkpoint {path} is corrupt or not a torch file ({type(err).__name__}; see the chained error)"
+        ) from err
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path} is not a {CHECKPOINT_FORMAT} checkpoint")
+    if payload["config_class"] not in _NETS:
+        raise ValueError(f"checkpoint {path} holds an unknown config class {payload['config_class']!r}")
+    config_class, net_class = _NETS[payload["config_class"]]
+    if tuple(payload["seg_classes"]) != rooms.SEG_CLASSES:
+        raise ValueError(
+            f"checkpoint {path} was trained with segmentation classes {payload['seg_classes']}, "
+            f"but this code has {list(rooms.SEG_CLASSES)}"
+        )
+    resolution = payload["resolution"]
+    if resolution is not None:
+        width, height = resolution
+        want = (
+            width if expect_width is None else expect_width,
+            height if expect_height is None else expect_height,
+        )
+        if (width, height) != want:
+            raise ValueError(
+                f"checkpoint {path} was trained at {width}x{height} (width x height) "
+                f"but {want[0]}x{want[1]} was expected"
+            )
+    try:
+        config = config_class(**payload["config"])
+        model = net_class(config)
+        model.load_state_dict(payload["state_dict"])
+    except (TypeError, RuntimeError) as err:
+        raise ValueError(f"checkpoint {path} does not match the {net_class.__name__} code: {err}") from err
+    model.eval()
+    return model, config, payload["extra"]

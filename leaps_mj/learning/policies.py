@@ -1,0 +1,170 @@
+"""Learned sub-policies μ(θ): per-target actor-critics behind the SubPolicy interface.
+
+A sub-policy has ``reset(target)`` (a new run towards a room type, or the
+untyped ``indoor`` node; resets the LSTM state) and ``act(timestep) -> int``.
+:class:`LearnedSubPolicy` holds one network per target, loaded from
+``<folder>/<target>.pt`` as written by ``python -m leaps_mj.train policy``.
+:func:`load_default` loads the
+checkpoints shipped with the package (the ``cpu`` preset, 40x30 frames); they
+act on 40x30 environments or on frames of an integer multiple of that size
+(120x90), which they subsample. :func:`load_augmented` loads the shipped
+semantic-augmented policies μ_s (same preset, trained with
+``--use-semantic true``): the same class, whose networks also read the
+observation's room-type bits and the target one-hot.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from leaps_mj.learning import nets
+from leaps_mj.world import rooms
+
+#: Folder of the shipped checkpoints (cpu preset).
+DEFAULT_DIR = rooms.DATA_DIR / "policies" / "cpu"
+#: The command that trains them.
+TRAIN_COMMAND = ("python -m leaps_mj.train policy --preset cpu --target all --out runs/policy_cpu && "
+                 f"cp runs/policy_cpu/*.pt {DEFAULT_DIR}/")
+#: Folder of the shipped semantic-augmented policies μ_s (cpu preset, the 8 room types).
+AUGMENTED_DIR = DEFAULT_DIR.parent / "aug_cpu"
+#: The command that trains them.
+AUGMENTED_TRAIN_COMMAND = ("python -m leaps_mj.train policy --preset cpu --use-semantic true --target all "
+                           f"--out runs/policy_aug_cpu && cp runs/policy_aug_cpu/*.pt {AUGMENTED_DIR}/")
+
+
+class LearnedSubPolicy:
+    """Per-target CNN+LSTM policies acting on segmentation + depth.
+
+    Networks trained with ``use_semantic`` (μ_s) also get the observation's
+    ``semantic`` bits and the one-hot of the target given to :meth:`reset`
+    (the target they were trained for), so they act in any environment
+    whatever its own target.
+
+    Args:
+      folder: Folder with one ``<target>.pt`` checkpoint per target.
+      targets: Targets to load (default: the 8 room types and ``indoor``).
+      greedy: Take the most likely action instead of sampling one.
+      seed: Seed of the action sampling.
+      width, height: If given, the resolution the checkpoints must have.
+      use_semantic: Whether the checkpoints must be μ_s networks (True) or
+        pixel-only sub-policies (False).
+
+    Attributes:
+      width, height: Frame resolution the networks take (make the
+        environment with these).
+      targets: The loaded room types.
+
+    Raises:
+      ValueError: if a checkpoint is missing, unreadable, of another
+        resolution than asked or of the other kind (``use_semantic``), or
+        the checkpoints disagree on resolution.
+    """
+
+    def __init__(self, folder: str | os.PathLike, targets: Sequence[str] = rooms.GRAPH_NODES,
+                 greedy: bool = False, seed: int = 0, width: int | None = None, height: int | None = None,
+                 use_semantic: bool = False):
+        folder = pathlib.Path(folder)
+        if not targets:
+            raise ValueError("targets is empty: expected at least one room type")
+        self.nets: dict[str, nets.ActorCritic] = {}
+        self.metadata: dict[str, dict] = {}
+        for target in targets:
+            rooms.room_index(target)
+            model, config, extra = nets.load_policy(folder / f"{target}.pt", width, height)
+            if not isinstance(model, nets.ActorCritic) or config.use_semantic != use_semantic:
+                kind = "semantic-augmented policy (μ_s)" if use_semantic else "pixel-only sub-policy"
+                raise ValueError(f"{folder / f'{target}.pt'} is not a {kind} ({type(model).__name__}, "
+                                 f"use_semantic={getattr(config, 'use_semantic', None)})")
+            width, height = config.width, config.height
+            self.nets[target] = model
+            self.metadata[target] = extra
+        self.width, self.height = width, height
+        self.targets = tuple(targets)
+        self.use_semantic = use_semantic
+        self.greedy = greedy
+        self._generator = torch.Generator().manual_seed(seed)
+        self._net: nets.ActorCritic | None = None
+        self._state = None
+        self._target_onehot = None
+
+    def seed(self, seed: int) -> None:
+        """Restarts the action sampler from ``seed`` (e.g. per evaluated episode, so
+        results do not depend on which episodes a process ran before)."""
+        self._generator.manual_seed(seed)
+
+    def reset(self, target: str) -> None:
+        """Starts a run towards ``target``: switches network, zeroes the LSTM state.
+
+        Raises:
+          ValueError: for a room type without a loaded network.
+        """
+        if target not in self.nets:
+            raise ValueError(f"no sub-policy for target {target!r}; loaded: {list(self.targets)}")
+        self._net = self.nets[target]
+        self._state = self._net.initial_state(1)
+        self._target_onehot = torch.as_tensor(rooms.target_onehot(target), dtype=torch.float32)[None]
+
+    def _frame(self, frame) -> np.ndarray:
+        """The frame at the policy's resolution (subsampled from an integer multiple)."""
+        frame = np.asarray(frame)
+        h, w = frame.shape[-2:]
+        k = h // self.height
+        if frame.ndim == 2 and k >= 1 and (h, w) == (k * self.height, k * self.width):
+            return frame[k // 2::k, k // 2::k]
+        raise ValueError(f"frame of shape {frame.shape}; this policy takes {self.width}x{self.height} frames "
+                         f"(width x height) or an integer multiple of that size")
+
+    @torch.no_grad()
+    def act(self, timestep) -> int:
+        """The action for a time step's observation (segmentation + depth).
+
+        Frames rendered at an integer multiple ``k`` of the policy's resolution
+        (120x90 for the 40x30 shipped policies) are subsampled at the centre
+        pixel of every k x k block: the same rays as rendering at the policy's
+        resolution, so the same frame.
+
+        Raises:
+          ValueError: before :meth:`reset`, or for frames of another resolution.
+        """
+        if self._net is None:
+            raise ValueError("call reset(target) before act()")
+        obs = timestep.observation
+        x = nets.ActorCritic.preprocess({k: self._frame(obs[k])[None] for k in ("segmentation", "depth")})
+        if self.use_semantic:
+            x["semantic"] = torch.as_tensor(np.asarray(obs["semantic"], np.float32)[None])
+            x["target"] = self._target_onehot
+        logits, _, self._state = self._net(x, self._state)
+        if self.greedy:
+            return int(logits.argmax(-1))
+        return int(torch.multinomial(torch.softmax(logits[0], -1), 1, generator=self._generator))
+
+
+def _load_shipped(folder: pathlib.Path, targets: Sequence[str], command: str, use_semantic: bool,
+                  greedy: bool, seed: int) -> LearnedSubPolicy:
+    missing = [t for t in targets if not (folder / f"{t}.pt").is_file()]
+    if missing:
+        raise ValueError(f"no shipped checkpoints for {missing} in {folder}; train them with `{command}`")
+    return LearnedSubPolicy(folder, targets, greedy=greedy, seed=seed, use_semantic=use_semantic)
+
+
+def load_default(greedy: bool = False, seed: int = 0) -> LearnedSubPolicy:
+    """The shipped sub-policies (cpu preset, 40x30) for the 8 room types and ``indoor``.
+
+    Raises:
+      ValueError: if a shipped checkpoint is missing, naming the command that trains them.
+    """
+    return _load_shipped(DEFAULT_DIR, rooms.GRAPH_NODES, TRAIN_COMMAND, False, greedy, seed)
+
+
+def load_augmented(greedy: bool = False, seed: int = 0) -> LearnedSubPolicy:
+    """The shipped semantic-augmented policies μ_s (cpu preset, 40x30) for the 8 room types.
+
+    Raises:
+      ValueError: if a shipped checkpoint is missing, naming the command that trains them.
+    """
+    return _load_shipped(AUGMENTED_DIR, rooms.ROOM_TYPES, AUGMENTED_TRAIN_COMMAND, True, greedy, seed)

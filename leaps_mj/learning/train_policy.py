@@ -1,0 +1,447 @@
+"""Trains the per-target sub-policies μ(θ): DAgger warm start, A2C, or both.
+
+``python -m leaps_mj.train policy --target kitchen|...|all --preset tiny|cpu|paper --out DIR``
+
+With ``--use-semantic true`` the same recipe trains the semantic-augmented
+policy μ_s of the paper's baselines: the network also reads the room-type
+bits and the target one-hot (``leaps_mj.learning.policies.load_augmented``).
+
+One :class:`~leaps_mj.learning.nets.ActorCritic` per target — the 8 room types and
+the untyped ``indoor`` node (hallways, for LEAPS's hallway hops) — on
+segmentation + depth frames. Three methods:
+
+* ``a2c`` — the paper's synchronous advantage actor-critic: ``t_max``-step
+  unrolls of ``num_envs`` environments in worker processes, n-step returns
+  with γ = 0.97, entropy bonus 0.1, logits L2 0.01, advantage normalisation,
+  Adam (lr 1e-3, weight decay 1e-5), gradient clipping at 1.
+* ``dagger`` — imitation of :class:`leaps_mj.environment.expert.GeodesicExpert` with
+  DAgger: the expert labels every state the rollouts visit (it runs in the
+  worker, next to its environment). The first ``learner_envs`` environments
+  are always driven by the learner (on-policy data, and the success curve);
+  in the others each step's action is the expert's with probability β
+  (decaying linearly from 1 to ``beta_min``), else the learner's. The policy
+  minimises the cross-entropy to the labels on the fresh unroll and on
+  unrolls replayed from the aggregated dataset, and the value head regresses
+  the n-step returns so that A2C fine-tuning starts with a trained critic.
+* ``dagger+a2c`` — DAgger for ``dagger_fraction`` of the steps, then A2C.
+
+Training episodes are short (``horizon`` steps) and start near the target:
+within ``start_distance`` geodesic metres, growing by ``distance_step`` every
+``curriculum_iterations`` iterations (the paper's curriculum), with the shaped
+reward of the original release.
+
+Files under ``--out DIR`` per target::
+
+    <target>.pt            the policy (weights + config), loadable by leaps_mj.learning.policies
+    <target>/state.pt      resumable training state (weights, optimizer, counters)
+    <target>/progress.csv  one row per iteration (same scalars as TensorBoard)
+    <target>/events.*      TensorBoard: charts/..., losses/..., hyper-parameters once
+
+and ``training_curves.png`` once every target of the run is done. Re-running
+the same command resumes from ``state.pt`` (after a kill, too) and refuses a
+different configuration; the DAgger replay buffer is not checkpointed (it
+refills within ``buffer_steps`` samples).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import contextlib
+import dataclasses
+import os
+import pathlib
+import sys
+import time
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from leaps_mj.environment import vector
+from leaps_mj.learning import nets
+from leaps_mj.learning import trainer as trainer_lib
+from leaps_mj.learning.losses import a2c_loss, bc_loss, masked_mean, n_step_returns
+from leaps_mj.learning.policy_config import PRESETS, TrainConfig
+from leaps_mj.learning.policy_eval import evaluate, plot_curves
+from leaps_mj.learning.training_env import training_houses, training_vector_env
+from leaps_mj.world import rooms
+
+# -- rollouts ------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Unroll:
+    """``t_max`` steps of ``num_envs`` environments, as stored for updates.
+
+    Segmentation is uint8, depth float16 (the aggregated dataset keeps many).
+    """
+
+    segmentation: np.ndarray  # (T, B, H, W) uint8
+    depth: np.ndarray  # (T, B, H, W) float16
+    first: np.ndarray  # (T, B) float32, 1 where an episode began
+    valid: np.ndarray  # (T, B) float32, 0 at LAST observations (their action is ignored)
+    labels: np.ndarray  # (T, B) int64 expert actions (-1: none)
+    state: tuple[np.ndarray, np.ndarray]  # LSTM (h, c) at the unroll's start
+    semantic: np.ndarray | None = None  # (T, B, K) uint8 room-type bits (μ_s only)
+    target: np.ndarray | None = None  # (T, B, K) uint8 target one-hot (μ_s only)
+
+    def tensors(self, device) -> tuple[dict, torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        arrays = {"segmentation": self.segmentation, "depth": self.depth}
+        if self.semantic is not None:
+            arrays.update(semantic=self.semantic, target=self.target)
+        obs = nets.ActorCritic.preprocess(arrays, device)
+        first = torch.as_tensor(self.first, device=device)
+        state = tuple(torch.as_tensor(s, device=device) for s in self.state)
+        return obs, first, state
+
+
+class EpisodeStats:
+    """Outcomes of the last ``window`` episodes finished in rollouts: learner-driven or mixed."""
+
+    def __init__(self, num_envs: int, window: int = 50):
+        self.returns = np.zeros(num_envs)
+        self.recent = {"learner": collections.deque(maxlen=window), "mixed": collections.deque(maxlen=window)}
+        self.finished = 0
+
+    def record(self, i: int, ts, mixed: bool) -> None:
+        if ts.reward is not None:
+            self.returns[i] += ts.reward
+        if ts.last():
+            self.recent["mixed" if mixed else "learner"].append(
+                (float(ts.discount == 0.0), self.returns[i]))
+            self.returns[i] = 0.0
+            self.finished += 1
+
+    def summary(self) -> dict[str, float]:
+        out = {}
+        for who, items in self.recent.items():
+            if items:
+                arr = np.array(items)
+                prefix = "" if who == "learner" else "mixed_"
+                out[f"{prefix}success_rate"] = float(arr[:, 0].mean())
+                out[f"{prefix}episode_return"] = float(arr[:, 1].mean())
+        return out
+
+
+class Trainer(trainer_lib.Trainer):
+    """Trains (or resumes) the policy of one target; see the module docstring.
+
+    Args:
+      config: The run's configuration.
+      target: Target room type.
+      out: Output folder of the run (shared by the targets).
+      device: Torch device of the network.
+      progress: Show a tqdm progress bar.
+    """
+
+    csv_fields = ("iteration", "global_step", "phase", "SPS", "beta", "start_distance", "success_rate",
+                  "episode_return", "mixed_success_rate", "mixed_episode_return", "episodes",
+                  "bc_cross_entropy", "bc_accuracy", "expert_agreement", "policy_loss", "value_loss", "entropy",
+                  "logits_l2", "grad_norm", "act_forward_seconds", "update_forward_seconds",
+                  "update_backward_seconds", "env_wait_seconds", "worker_physics_seconds", "worker_render_seconds",
+                  "worker_expert_seconds")
+    loss_keys = frozenset({"policy_loss", "value_loss", "entropy", "logits_l2", "bc_cross_entropy", "bc_accuracy",
+                           "grad_norm", "expert_agreement"})
+
+    def __init__(self, config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
+                 progress: bool = True):
+        rooms.room_index(target)
+        super().__init__(config, pathlib.Path(out) / target, config.iterations, config.checkpoint_every,
+                         progress=progress, desc=f"{target} {config.method}")
+        self.target = target
+        self.run_dir = pathlib.Path(out)
+        self.policy_path = self.run_dir / f"{target}.pt"
+        self.device = torch.device(device)
+        self.global_step = 0
+        self.eval: dict | None = None
+        torch.manual_seed(config.seed * 1000 + rooms.room_index(target))
+        self.model = nets.ActorCritic(config.policy_config())
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.resume(config.width, config.height)
+        self.model.to(self.device).train()
+        self.buffer: collections.deque[Unroll] = collections.deque(
+            maxlen=max(1, config.buffer_steps // config.batch))
+
+    # -- what the skeleton checkpoints and ships -----------------------------------------------
+    def state(self) -> dict[str, Any]:
+        return {"target": self.target, "method": self.config.method, "global_step": self.global_step,
+                "eval": self.eval}
+
+    def load_state(self, extra: dict[str, Any]) -> None:
+        if extra["target"] != self.target:
+            raise ValueError(f"{self.state_path} holds a run for target {extra['target']!r}, not {self.target!r}; "
+                             "use another --out")
+        self.global_step, self.eval = extra["global_step"], extra.get("eval")
+
+    def publish(self, extra: dict[str, Any]) -> None:
+        nets.save_checkpoint(self.policy_path, self.model, self.model.config, extra)
+
+    def hyperparameters(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self.config), "target": self.target}
+
+    def log_step(self, row: dict[str, Any]) -> int:
+        return self.global_step
+
+    def postfix(self, row: dict[str, Any]) -> dict[str, str]:
+        return {"sps": f"{row['SPS']:.0f}", "success": f"{row.get('success_rate', 0):.2f}",
+                "beta": f"{row['beta']:.2f}"}
+
+    # -- training --------------------------------------------------------------------------
+    def _worker_kwargs(self) -> list[dict[str, Any]]:
+        c = self.config
+        shards = training_houses(c.dataset, self.target, c.num_houses, c.num_envs, self.run_dir)
+        return [dict(houses_dir=str(shard), width=c.width, height=c.height, horizon=c.horizon, reward="shaped",
+                     targets=(self.target,), max_start_distance=c.start_distance_at(self.iteration))
+                for shard in shards]
+
+    @contextlib.contextmanager
+    def session(self):
+        """The vector environment and the carried rollout state of one ``train`` call."""
+        c = self.config
+        seed = (c.seed * 1000 + rooms.room_index(self.target)) * 100_000 + self.iteration * c.num_envs
+        with training_vector_env(self._worker_kwargs(), seed, c, self.iteration, c.method != "a2c") as envs:
+            self._envs, self._timesteps = envs, envs.reset()
+            self._state = self.model.initial_state(c.num_envs, self.device)
+            self._stats = EpisodeStats(c.num_envs)
+            yield
+
+    def iterate(self) -> dict[str, Any]:
+        c = self.config
+        t0 = time.perf_counter()
+        rng = np.random.default_rng([c.seed, rooms.room_index(self.target), self.iteration])
+        gen = torch.Generator(device=self.device).manual_seed(int(rng.integers(2**63)))
+        beta = c.beta_at(self.iteration)
+        unroll, batch, self._timesteps, self._state, rollout_times = self._rollout(
+            self._envs, self._timesteps, self._state, beta, rng, gen, self._stats)
+        scalars = self._update(unroll, batch, rng)
+        self.global_step += c.batch
+        phase = "dagger" if self.iteration + 1 <= c.dagger_iterations and c.method != "a2c" else "a2c"
+        return {"global_step": self.global_step, "phase": phase, **scalars, **self._stats.summary(), "beta": beta,
+                "start_distance": c.start_distance_at(self.iteration), "SPS": c.batch / (time.perf_counter() - t0),
+                "episodes": self._stats.finished, **rollout_times}
+
+    def _rollout(self, envs, timesteps, state, beta, rng, gen, stats):
+        """Collects one unroll; returns it with the A2C batch and the carried state."""
+        c = self.config
+        T, B = c.t_max, c.num_envs
+        seg = np.zeros((T, B, c.height, c.width), np.uint8)
+        depth = np.zeros((T, B, c.height, c.width), np.float16)
+        keys = ("segmentation", "depth") + (("semantic", "target") if c.use_semantic else ())
+        bits = {k: np.zeros((T, B, rooms.NUM_ROOM_TYPES), np.uint8) for k in keys[2:]}
+        first, valid = np.zeros((T, B), np.float32), np.zeros((T, B), np.float32)
+        labels, actions = np.zeros((T, B), np.int64), np.zeros((T, B), np.int64)
+        rewards, discounts = np.zeros((T, B)), np.zeros((T, B))
+        values, bootstrap = np.zeros((T + 1, B)), np.zeros((T, B), bool)
+        start_state = tuple(s.detach().cpu().numpy() for s in state)
+        times = collections.Counter()
+        for t in range(T + 1):
+            obs = {k: vector.stack(timesteps, k) for k in keys + ("expert_action",)}
+            is_first = np.array([ts.first() for ts in timesteps], np.float32)
+            f0 = time.perf_counter()
+            with torch.no_grad():
+                x = nets.ActorCritic.preprocess(obs, self.device)
+                logits, value, new_state = self.model(x, state, torch.as_tensor(is_first, device=self.device))
+                learner = torch.multinomial(torch.softmax(logits, -1), 1, generator=gen).squeeze(-1).cpu().numpy()
+            times["act_forward_seconds"] += self._elapsed(f0)
+            values[t] = value.cpu().numpy()
+            if t == T:
+                break
+            state = new_state
+            seg[t], depth[t], first[t], labels[t] = obs["segmentation"], obs["depth"], is_first, obs["expert_action"]
+            for k, array in bits.items():
+                array[t] = obs[k]
+            valid[t] = [not ts.last() for ts in timesteps]
+            expert = (rng.random(B) < beta) & (np.arange(B) >= c.learner_envs) & (labels[t] >= 0)
+            actions[t] = np.where(expert, labels[t], learner)
+            e0 = time.perf_counter()
+            timesteps = envs.step([int(a) for a in actions[t]])
+            times["env_wait_seconds"] += time.perf_counter() - e0
+            for i, ts in enumerate(timesteps):
+                stats.record(i, ts, i >= c.learner_envs and beta > 0)
+                times["worker_physics_seconds"] += ts.observation["step_seconds"][0]
+                times["worker_render_seconds"] += ts.observation["step_seconds"][1]
+                times["worker_expert_seconds"] += ts.observation["step_seconds"][2]
+                if valid[t, i]:
+                    rewards[t, i] = ts.reward
+                    discounts[t, i] = c.gamma * ts.discount
+                bootstrap[t, i] = ts.last() or t == T - 1
+        returns = n_step_returns(rewards, discounts, values[1:], bootstrap)
+        unroll = Unroll(seg, depth, first, valid, labels, start_state, **bits)
+        batch = {"actions": actions, "returns": returns.astype(np.float32)}
+        return unroll, batch, timesteps, state, dict(times)
+
+    def _elapsed(self, since: float) -> float:
+        """Seconds since ``since``, after the device's queued work is done."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        return time.perf_counter() - since
+
+    def _unroll_forward(self, unroll: Unroll):
+        t0 = time.perf_counter()
+        obs, first, state = unroll.tensors(self.device)
+        logits, values, _ = self.model.forward_sequence(obs, state, first)
+        self._times["update_forward_seconds"] += self._elapsed(t0)
+        return logits, values
+
+    def _step(self, loss: torch.Tensor) -> float:
+        t0 = time.perf_counter()
+        self.optimizer.zero_grad()
+        loss.backward()
+        norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
+        self.optimizer.step()
+        self._times["update_backward_seconds"] += self._elapsed(t0)
+        return norm.item()
+
+    def _update(self, unroll: Unroll, batch: dict, rng: np.random.Generator) -> dict[str, float]:
+        """One update on the fresh unroll (+ replayed DAgger updates); returns log scalars."""
+        c = self.config
+        self._times = collections.Counter()
+        dev = self.device
+        valid = torch.as_tensor(unroll.valid, device=dev)
+        returns = torch.as_tensor(batch["returns"], device=dev)
+        logits, values = self._unroll_forward(unroll)
+        out = {}
+        if self.iteration < c.dagger_iterations:
+            labels = torch.as_tensor(unroll.labels, device=dev)
+            ce, out["bc_accuracy"] = bc_loss(logits, labels, valid)
+            value_loss = 0.5 * masked_mean((returns - values) ** 2, valid)
+            out["grad_norm"] = self._step(ce + c.value_coef * value_loss)
+            out["bc_cross_entropy"], out["value_loss"] = ce.item(), value_loss.item()
+            self.buffer.append(unroll)
+            for _ in range(c.replay):
+                old = self.buffer[int(rng.integers(len(self.buffer)))]
+                old_logits, _ = self._unroll_forward(old)
+                ce, _ = bc_loss(old_logits, torch.as_tensor(old.labels, device=dev),
+                                torch.as_tensor(old.valid, device=dev))
+                self._step(ce)
+        else:
+            actions = torch.as_tensor(batch["actions"], device=dev)
+            loss, out = a2c_loss(logits, values, actions, returns, valid, c)
+            if (unroll.labels >= 0).any():
+                _, out["expert_agreement"] = bc_loss(logits.detach(), torch.as_tensor(unroll.labels, device=dev),
+                                                     valid)
+            out["grad_norm"] = self._step(loss)
+        return {**out, **self._times}
+
+
+# -- a whole target ----------------------------------------------------------------------------
+
+
+def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
+               progress: bool = True, stop_after: int | None = None) -> dict | None:
+    """Trains one target to completion (resuming) and evaluates it once.
+
+    Returns:
+      The evaluation results, or None if ``stop_after`` ended the call early.
+    """
+    from leaps_mj.learning import policies
+
+    trainer = Trainer(config, target, out, device=device, progress=progress)
+    trainer.train(stop_after)
+    if not trainer.finished:
+        return None
+    if trainer.eval is None:
+        modes = {mode: policies.LearnedSubPolicy(out, targets=(target,), greedy=mode == "greedy", seed=config.seed,
+                                                   use_semantic=config.use_semantic)
+                 for mode in ("sampled", "greedy")}
+        seed = config.seed + 7919 * (1 + rooms.room_index(target))
+        trainer.eval = {f"{split}/{mode}": result for split in ("train", "valid")
+                        for mode, result in evaluate(modes, target, config, split, seed).items()}
+        trainer.save()
+    return trainer.eval
+
+
+# -- command line --------------------------------------------------------------------------------
+
+
+def _parse_bool(text: str) -> bool:
+    if text.lower() in ("1", "true", "yes"):
+        return True
+    if text.lower() in ("0", "false", "no"):
+        return False
+    raise argparse.ArgumentTypeError(f"{text!r}: expected true or false")
+
+
+def _parse_ints(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
+
+
+def parse_targets(text: str, use_semantic: bool) -> tuple[str, ...]:
+    """The targets of ``--target``: "all" or comma-separated names.
+
+    "all" is the 8 room types and ``indoor`` for sub-policies, the 8 room
+    types for μ_s (an agent runs μ_s towards its final target only, never
+    towards a hallway).
+
+    Raises:
+      ValueError: for an unknown or repeated name.
+    """
+    if text == "all":
+        return rooms.ROOM_TYPES if use_semantic else rooms.GRAPH_NODES
+    targets = tuple(t.strip() for t in text.split(","))
+    for target in targets:
+        if target not in rooms.GRAPH_NODES:
+            raise ValueError(f"target {target!r}: expected 'all' or comma-separated names from "
+                             f"{list(rooms.GRAPH_NODES)}")
+    if len(set(targets)) != len(targets):
+        raise ValueError(f"target {text!r} names a room type twice")
+    return targets
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m leaps_mj.train policy", description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu", help="base configuration")
+    parser.add_argument("--target", default="all",
+                        help=f"'all' or comma-separated names from {list(rooms.GRAPH_NODES)}")
+    parser.add_argument("--out", default="runs/policy", help="output folder (resumed if it holds a run)")
+    parser.add_argument("--device", default="cpu", help="torch device of the network (cpu, cuda)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch CPU threads of the learner (the environment workers use the other cores)")
+    parser.add_argument("--stop-after", type=int, default=None,
+                        help="stop each target after this many more iterations (checkpointed; rerun resumes)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
+    for field in dataclasses.fields(TrainConfig):
+        default = field.default
+        kind = {bool: _parse_bool, tuple: _parse_ints}.get(type(default), type(default))
+        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind, default=None,
+                           metavar=type(default).__name__.upper())
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
+                 if getattr(args, f.name) is not None}
+    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    targets = parse_targets(args.target, config.use_semantic)
+    if args.stop_after is not None and args.stop_after < 1:
+        raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")
+    if args.threads < 1:
+        raise ValueError(f"--threads {args.threads}: expected a positive integer")
+    torch.set_num_threads(args.threads)
+    out = pathlib.Path(args.out)
+    results = {}
+    for target in targets:
+        results[target] = run_target(config, target, out, args.device, not args.no_progress, args.stop_after)
+    print(f"{'target':12} {'train':>8} {'valid':>8} {'valid greedy':>13}  (success on sampled episodes)")
+    for target, res in results.items():
+        if res is None:
+            print(f"{target:12} {'(stopped early; rerun to resume)':>31}")
+        else:
+            print(f"{target:12} {res['train/sampled']['success_rate']:8.2f} {res['valid/sampled']['success_rate']:8.2f}"
+                  f" {res['valid/greedy']['success_rate']:13.2f}")
+    if all(r is not None for r in results.values()):
+        plot_curves(out, list(targets), out / "training_curves.png")
+        print(f"wrote {out / 'training_curves.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

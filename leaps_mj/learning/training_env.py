@@ -1,0 +1,164 @@
+"""The sub-policy trainer's environments: training houses per target, expert labels, worker processes.
+
+Each worker process runs a :class:`TrainingEnv`: a RoomNav environment over
+its shard of the training houses that have a room of the target type, with
+the geodesic expert's action (the DAgger label) and per-step timings added
+to the observation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+import pathlib
+import time
+from typing import Sequence
+
+import numpy as np
+
+from leaps_mj.environment import roomnav, vector
+from leaps_mj.environment.expert import GeodesicExpert
+from leaps_mj.learning.policy_config import TrainConfig
+from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import houses
+
+
+class TrainingEnv:
+    """Worker-side wrapper of a RoomNav environment for training.
+
+    Runs in the environment's worker process and adds to every observation:
+
+    * ``expert_action`` (int64 scalar): the geodesic expert's action for the
+      state (-1 when labelling is off), the DAgger label;
+    * ``step_seconds`` (float64 (3,)): seconds this step spent in physics and
+      collisions (``Task.before_step``), in rendering and the success test
+      (``Task.after_step``) and in the expert — for the throughput benchmark.
+
+    It also applies the distance curriculum: each new episode's start is
+    bounded by ``config.start_distance_at(iteration)``, where the iteration is
+    counted from the worker's own steps (every worker steps ``t_max`` times
+    per iteration), so no extra command is needed. The bound is set by
+    replacing the environment's ``config`` (``sample_episode`` reads
+    ``max_start_distance`` from it), and the timings wrap the task's
+    ``before_step`` / ``after_step`` on this instance.
+
+    Args:
+      env: The environment (from :func:`leaps_mj.load`).
+      config: The run's :class:`TrainConfig`.
+      first_iteration: Training iteration at which this worker starts.
+      seed: Seed of the expert's random moves.
+      label: Whether to compute expert labels.
+    """
+
+    def __init__(self, env, config: TrainConfig, first_iteration: int, seed: int, label: bool):
+        self._env = env
+        self._config = config
+        self._steps = first_iteration * config.t_max
+        self._expert = GeodesicExpert(env, seed=seed) if label else None
+        self._last = True
+        self._times = np.zeros(3)
+        task = env.task
+        task.before_step = self._timed(task.before_step, 0)
+        task.after_step = self._timed(task.after_step, 1)
+
+    def _timed(self, fn, slot):
+        def timed(*args):
+            t0 = time.perf_counter()
+            out = fn(*args)
+            self._times[slot] += time.perf_counter() - t0
+            return out
+        return timed
+
+    def _augment(self, ts):
+        self._last = ts.last()
+        t0 = time.perf_counter()
+        label = self._expert.act() if self._expert is not None and not ts.last() else -1
+        self._times[2] += time.perf_counter() - t0
+        obs = dict(ts.observation, expert_action=np.int64(label), step_seconds=self._times.copy())
+        self._times[:] = 0.0
+        return ts._replace(observation=obs)
+
+    def reset(self):
+        distance = self._config.start_distance_at(self._steps // self._config.t_max)
+        if self._env.config.max_start_distance != distance:
+            self._env.config = dataclasses.replace(self._env.config, max_start_distance=distance)
+        return self._augment(self._env.reset())
+
+    def step(self, action):
+        self._steps += 1
+        if self._last:
+            return self.reset()
+        return self._augment(self._env.step(action))
+
+    def reset_to(self, spec):
+        return self._augment(self._env.reset_to(spec))
+
+    @property
+    def episode(self):
+        return self._env.episode
+
+    def observation_spec(self):
+        return self._env.observation_spec()
+
+    def action_spec(self):
+        return self._env.action_spec()
+
+    def close(self):
+        self._env.close()
+
+
+def make_training_env(seed: int, config: TrainConfig, first_iteration: int, label: bool,
+                      **env_kwargs) -> TrainingEnv:
+    """A worker's :class:`TrainingEnv` (the ``make_env`` of :class:`leaps_mj.environment.vector.VectorEnv`)."""
+    return TrainingEnv(roomnav.load(seed=seed, **env_kwargs), config, first_iteration, seed, label)
+
+
+def training_vector_env(worker_kwargs: Sequence[dict], seed: int, config: TrainConfig, first_iteration: int,
+                        label: bool) -> vector.VectorEnv:
+    """Worker processes serving :class:`TrainingEnv`, each with its own arguments.
+
+    Args:
+      worker_kwargs: One dict of :func:`leaps_mj.load` arguments per worker
+        (its shard of the training houses: a worker keeps every house it
+        visits compiled).
+      seed: Worker ``i`` gets seed ``seed + i`` (environment and expert).
+      config: The run's :class:`TrainConfig`.
+      first_iteration: Iteration at which training (re)starts (curriculum).
+      label: Whether workers compute expert labels.
+    """
+    make_env = functools.partial(make_training_env, config=config, first_iteration=first_iteration, label=label)
+    return vector.VectorEnv(len(worker_kwargs), seed, make_env=make_env, worker_kwargs=list(worker_kwargs))
+
+
+def training_houses(dataset: str, target: str, num_houses: int, num_shards: int,
+                    out: pathlib.Path) -> list[pathlib.Path]:
+    """Shards of the training houses that have a ``target`` room, one folder of links per worker.
+
+    The houses are the first ``num_houses`` (0: all) of the train split that
+    have a room of type ``target``; worker ``i`` gets every ``num_shards``-th
+    one from the ``i``-th on (or house ``i mod n`` when there are fewer
+    houses than workers).
+
+    Raises:
+      ValueError: if no training house has a ``target`` room.
+    """
+    files = [p for p in dataset_lib.list_houses(dataset, "train") if target in houses.House.load(p).room_types]
+    if num_houses:
+        files = files[:num_houses]
+    if not files:
+        raise ValueError(f"no training house of dataset {dataset!r} has a room of type {target!r}")
+    folders = []
+    for i in range(num_shards):
+        folder = out / "houses" / target / f"worker_{i:03d}"
+        folder.mkdir(parents=True, exist_ok=True)
+        for path in files[i::num_shards] or [files[i % len(files)]]:
+            for src in (path, path.with_suffix(".xml")):
+                link = folder / src.name
+                if not link.exists():
+                    tmp = folder / f".{src.name}.tmp"
+                    tmp.unlink(missing_ok=True)
+                    tmp.symlink_to(src.resolve())
+                    os.replace(tmp, link)
+        folders.append(folder)
+    return folders
