@@ -15,22 +15,34 @@ Prints one table, every row measured in this run, interleaved over rounds
 * ``miniworld``: Farama MiniWorld FourRooms at the same resolution (RGB), the
   lightweight peer (``pip install miniworld``; rendered headless through
   pyglet's EGL mode). Skipped with a note when not installed.
-* ``vector xN``: total steps/s of N worker processes.
+* ``egl process`` / ``osmesa process``: one RoomNav environment in a fresh
+  process with ``MUJOCO_GL`` set to that backend (the backend is fixed when
+  MuJoCo is imported, so each runs in its own process), rounds interleaved;
+  ``rel`` is against the EGL process. Skipped for a backend whose library is
+  missing.
+* ``vector W x K``: total steps/s of ``W`` worker processes holding ``K``
+  environments each (:class:`leaps_mj.environment.vector.VectorEnv`: one
+  message per worker per step, frames through shared memory); ``rel`` is
+  against the one in-process environment.
 
-    python benchmarks/env_throughput.py [--dataset roomnav-v1] [--seconds 3] [--rounds 3]
+    python benchmarks/env_throughput.py [--dataset roomnav-v2] [--seconds 3] [--rounds 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes.util
+import os
 import statistics
+import subprocess
+import sys
 import time
 
 import numpy as np
 
 import leaps_mj
 from leaps_mj.environment import vector
-from leaps_mj.world import rooms
+from leaps_mj.world import dataset, rooms
 
 
 def _rate(fn, seconds: float) -> float:
@@ -98,20 +110,56 @@ def miniworld_stepper(width, height, seed=0):
     return step, None
 
 
-def vector_rate(dataset, n, width, height, seconds):
-    with vector.VectorEnv(n, seed=0, dataset=dataset, split="train", width=width, height=height,
-                          horizon=10**9) as venv:
+def vector_rate(dataset, workers, per_worker, width, height, seconds):
+    n = workers * per_worker
+    with vector.VectorEnv(n, seed=0, num_workers=workers, dataset=dataset, split="train", width=width,
+                          height=height, horizon=10**9) as venv:
         venv.reset()
         rng = np.random.default_rng(0)
-        return n * _rate(lambda: venv.step(list(rng.integers(rooms.NUM_ACTIONS, size=n))), seconds)
+        step = lambda: venv.step(list(rng.integers(rooms.NUM_ACTIONS, size=n)))  # noqa: E731
+        _rate(step, 0.5)  # warm-up: compiles each worker's first houses
+        return n * _rate(step, seconds)
+
+
+#: Steps one environment for argv[4] seconds after a warm-up and prints its steps/s.
+_BACKEND_PROBE = """
+import sys, time, numpy as np, leaps_mj
+env = leaps_mj.load(sys.argv[1], "train", seed=0, width=int(sys.argv[2]), height=int(sys.argv[3]), horizon=10**9)
+rng = np.random.default_rng(0)
+env.reset()
+def run(seconds):
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        env.step(int(rng.integers(9)))
+        n += 1
+    return n / (time.perf_counter() - t0)
+run(0.5)
+print(run(float(sys.argv[4])))
+env.close()
+"""
+
+
+def backend_rates(dataset, width, height, seconds, rounds) -> dict[str, float]:
+    """Median steps/s of one environment per off-screen backend, each in its own process, interleaved."""
+    backends = [b for b, lib in (("egl", "EGL"), ("osmesa", "OSMesa")) if ctypes.util.find_library(lib)]
+    rates = {b: [] for b in backends}
+    for _ in range(rounds):
+        for backend in backends:
+            env = {k: v for k, v in os.environ.items() if k not in ("PYOPENGL_PLATFORM", "LEAPS_MJ_GL_PROBLEM")}
+            env["MUJOCO_GL"] = backend
+            out = subprocess.run([sys.executable, "-c", _BACKEND_PROBE, dataset, str(width), str(height),
+                                  str(seconds)], env=env, capture_output=True, text=True, check=True)
+            rates[backend].append(float(out.stdout.split()[-1]))
+    return {b: statistics.median(v) for b, v in rates.items()}
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--dataset", default="roomnav-v1")
+    p.add_argument("--dataset", default=dataset.CANONICAL)
     p.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--workers", type=int, nargs="*", default=[1, 2])
+    p.add_argument("--workers", type=int, nargs="*", default=[1, 2], help="worker processes of the vector rows")
+    p.add_argument("--per-worker", type=int, nargs="*", default=[1, 4], help="environments per worker")
     args = p.parse_args(argv)
 
     rows, notes = [], []
@@ -138,16 +186,21 @@ def main(argv=None):
             rows.append((f"{width}x{height}", k, f"{v:,.0f}", rel))
         if note:
             rows.append((f"{width}x{height}", "miniworld", "-", note))
-        for n in args.workers:
-            v = vector_rate(args.dataset, n, width, height, args.seconds)
-            rows.append((f"{width}x{height}", f"vector x{n}", f"{v:,.0f}", f"{v / med['roomnav']:.2f}"))
+        backends = backend_rates(args.dataset, width, height, args.seconds, args.rounds)
+        for backend, v in backends.items():
+            rows.append((f"{width}x{height}", f"{backend} process", f"{v:,.0f}", f"{v / backends['egl']:.2f}"
+                         if "egl" in backends else "-"))
+        for w in args.workers:
+            for k in args.per_worker:
+                v = vector_rate(args.dataset, w, k, width, height, args.seconds)
+                rows.append((f"{width}x{height}", f"vector {w} x {k}", f"{v:,.0f}", f"{v / med['roomnav']:.2f}"))
 
     print(f"\nsteps/s, median of {args.rounds} interleaved rounds of {args.seconds:g} s "
           "(rel = rate / roomnav single-process rate at that resolution)\n")
-    print(f"| {'resolution':<10} | {'what':<13} | {'steps/s':>9} | {'rel':>6} |")
-    print(f"|{'-' * 12}|{'-' * 15}|{'-' * 11}|{'-' * 8}|")
+    print(f"| {'resolution':<10} | {'what':<14} | {'steps/s':>9} | {'rel':>6} |")
+    print(f"|{'-' * 12}|{'-' * 16}|{'-' * 11}|{'-' * 8}|")
     for r in rows:
-        print(f"| {r[0]:<10} | {r[1]:<13} | {r[2]:>9} | {r[3]:>6} |")
+        print(f"| {r[0]:<10} | {r[1]:<14} | {r[2]:>9} | {r[3]:>6} |")
     print()
     print("\n".join(notes))
 

@@ -14,7 +14,7 @@ noisy shared machine affects all rows alike:
 
 The last columns are the recorded file size per step and the slowdown.
 
-    python benchmarks/record_overhead.py [--dataset roomnav-v1] [--episodes 4] [--steps 150] [--rounds 5]
+    python benchmarks/record_overhead.py [--dataset roomnav-v2] [--episodes 4] [--steps 150] [--rounds 5]
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ import numpy as np
 import leaps_mj
 from leaps_mj.planning import semantic
 from leaps_mj.records import recorder as record
-from leaps_mj.world import rooms
+from leaps_mj.world import dataset, rooms
 
 
 def run(env, specs, actions, recorder=None, info=None) -> tuple[float, int]:
@@ -54,7 +54,7 @@ def run(env, specs, actions, recorder=None, info=None) -> tuple[float, int]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--dataset", default="roomnav-v1")
+    p.add_argument("--dataset", default=dataset.CANONICAL)
     p.add_argument("--split", default="test")
     p.add_argument("--episodes", type=int, default=4)
     p.add_argument("--steps", type=int, default=150, help="random actions per episode")

@@ -31,6 +31,7 @@ import tempfile
 import numpy as np
 
 from leaps_mj.learning import nets, policy_eval, train_policy
+from leaps_mj.world import dataset
 
 _COLUMNS = (
     ("act_forward_seconds", "act fwd"),
@@ -72,7 +73,7 @@ def main(argv=None) -> int:
     parser.add_argument("--num-envs", type=int, default=8, help="environment worker processes")
     parser.add_argument("--device", default="cpu", help="torch device of the learner")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of the learner")
-    parser.add_argument("--dataset", default="roomnav-v1")
+    parser.add_argument("--dataset", default=dataset.CANONICAL)
     parser.add_argument("--target", default="kitchen")
     args = parser.parse_args(argv)
     if args.iterations < 1 or args.warmup < 0 or args.num_envs < 1 or args.threads < 1:

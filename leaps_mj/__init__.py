@@ -1,29 +1,26 @@
 """RoomNav-MJ and LEAPS: semantic multi-room navigation in MuJoCo.
 
-Importing the package picks an off-screen OpenGL backend for MuJoCo when
-``MUJOCO_GL`` is unset (EGL if Mesa's or a vendor's libEGL is present, else
-OSMesa), because dm_control reads that variable once, at import. It also
+Importing the package settles MuJoCo's off-screen OpenGL backend before
+MuJoCo is imported (:mod:`leaps_mj.environment.gl_backend`: EGL when it
+starts, else OSMesa, else a clear error when a context is asked for),
+because MuJoCo and dm_control read ``MUJOCO_GL`` once, at import. It also
 asks Mesa's software rasteriser for one thread per process
 (``LP_NUM_THREADS=1`` unless set): frames of 120x90 are too small to gain
-from threads, and environments run one per process.
+from threads, and environments run one per process. When standard error is
+not a terminal (a log file, CI), progress bars redraw at most every 30 s
+(``TQDM_MININTERVAL``, unless set), so a log gets a few lines per bar rather
+than hundreds of carriage-return updates.
 """
 
-import ctypes.util
 import os
+import sys
 
+from leaps_mj.environment import gl_backend
 
-def _default_gl_backend() -> str:
-    if ctypes.util.find_library("EGL"):
-        return "egl"
-    return "osmesa"
-
-
-os.environ.setdefault("MUJOCO_GL", _default_gl_backend())
+gl_backend.configure()
 os.environ.setdefault("LP_NUM_THREADS", "1")
-if os.environ["MUJOCO_GL"] == "osmesa":
-    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
-elif os.environ["MUJOCO_GL"] == "egl":
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+if not (sys.stderr is not None and sys.stderr.isatty()):
+    os.environ.setdefault("TQDM_MININTERVAL", "30")
 
 __version__ = "0.1.0"
 

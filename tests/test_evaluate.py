@@ -151,3 +151,15 @@ def test_learned_baselines_run_on_the_shipped_checkpoints(tiny_dataset, tmp_path
     assert set(one) == {"aug", "controller"}
     for rows in one.values():
         assert [int(r["episode"]) for r in rows] == [0, 1] and all(int(r["steps"]) <= 30 for r in rows)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--num-workers", "0"], "--workers/--num-workers 0"),
+    (["--ray-address", "10.0.0.1:6379"], "--ray-address '10.0.0.1:6379' needs --backend ray"),
+])
+def test_bad_backend_options_are_usage_errors(tiny_dataset, tmp_path, capsys, extra, message):
+    with pytest.raises(SystemExit) as e:
+        _main(tiny_dataset, tmp_path / "eval", *extra)
+    assert e.value.code == 2 and message in capsys.readouterr().err
+    with pytest.raises(ValueError, match="backend 'dask'"):
+        evaluate.run(evaluate.EvalConfig(), [], [], tmp_path / "x", backend="dask")

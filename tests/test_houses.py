@@ -1,4 +1,4 @@
-"""Tests for the house generator, the MJCF scenes and the roomnav-v1 dataset."""
+"""Tests for the house generator, the MJCF scenes and the canonical dataset (roomnav-v2)."""
 
 import json
 import pathlib
@@ -185,9 +185,9 @@ def test_stats_on_a_small_set(house_set):
 # --- dataset tool --------------------------------------------------------------
 
 
-def _run(*args, script=MAKE_HOUSES):
+def _run(*args, script=MAKE_HOUSES, timeout=120):
     return subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=timeout)
 
 
 @pytest.mark.parametrize(
@@ -198,6 +198,7 @@ def _run(*args, script=MAKE_HOUSES):
         (["--train", "0", "--valid", "0", "--test", "0"], "all 0"),
         (["--seed", "-3"], "non-negative integer"),
         (["--workers", "0"], "positive integer"),
+        (["--preview", "dev"], "invalid choice: 'dev'"),
         (["--bogus"], "unrecognized arguments"),
     ],
 )
@@ -249,6 +250,8 @@ def test_write_dataset_rejects_bad_arguments(tmp_path):
         dataset.write_dataset(tmp_path, {"train": 0})
     with pytest.raises(ValueError, match="unknown split"):
         dataset.write_dataset(tmp_path, {"dev": 1})
+    with pytest.raises(ValueError, match="unknown split 'dev'"):
+        dataset.write_dataset(tmp_path, {"train": 1}, preview=("dev",))
 
 
 def test_dataset_lookup_errors(tmp_path):
@@ -290,17 +293,25 @@ def test_canonical_dataset_first_houses_reproduce_the_manifest():
 
 def test_canonical_dataset_statistics_resemble_real_homes():
     stats = house_stats.compute(h for s in dataset.SPLITS for h in dataset.load_houses(dataset.CANONICAL, s))
-    assert house_stats.frequency_error(stats) < 0.05
+    assert house_stats.frequency_error(stats) < 0.02
     for t, f in house_stats.reference_frequency().items():
-        assert abs(stats.type_frequency[t] - f) < 0.1, t
+        assert abs(stats.type_frequency[t] - f) <= 0.03, t
     rho, _, n = house_stats.rank_correlation(stats)
     assert n == 36
-    assert rho >= 0.6
+    assert rho >= 0.85
+    # The five strongest reference pairs are among our seven strongest.
+    ref = house_stats.reference_adjacency()
+    ref_top = sorted(house_stats.PAIRS, key=lambda p: -ref[p])[:5]
+    ours_top = sorted(house_stats.PAIRS, key=lambda p: (-stats.adjacency[p], house_stats.PAIRS.index(p)))[:7]
+    assert set(ref_top) <= set(ours_top), (ref_top, ours_top)
+    # Not every garage opens to the yard (0.28 in the reference).
+    assert stats.adjacency[("outdoor", "garage")] <= 0.6
+    assert max(stats.diameter_distribution) >= 5
 
 
 @pytest.mark.slow
 def test_regenerating_the_canonical_dataset_reproduces_its_manifest(tmp_path):
-    res = _run("--out", tmp_path / "d", "--name", dataset.CANONICAL, "--quiet")
+    res = _run("--out", tmp_path / "d", "--name", dataset.CANONICAL, "--quiet", timeout=600)
     assert res.returncode == 0, res.stderr
     assert (tmp_path / "d" / dataset.MANIFEST).read_bytes() == (CANONICAL / dataset.MANIFEST).read_bytes()
     assert dataset.verify(CANONICAL) == []

@@ -1,7 +1,9 @@
-"""Writes the fixed evaluation episodes of a dataset (stratified by plan length).
+"""Writes the fixed evaluation episodes of a dataset (stratified by plan length), or its hop episodes.
 
-    python tools/make_episodes.py                       # roomnav-v1: valid (100/length) and test (500/length)
+    python tools/make_episodes.py                       # the canonical dataset: valid (100/length) and test (500/length)
     python tools/make_episodes.py --split test --per-length 500 --seed 0
+    python tools/make_episodes.py --hops                # hops_{valid,test}.jsonl: 20 / 30 starts per node and door distance
+    python tools/make_episodes.py --hops --dataset roomnav-v2 --split test --per-node 30
 """
 
 import argparse
@@ -9,28 +11,45 @@ import sys
 import time
 
 from leaps_mj.environment import episodes
+from leaps_mj.world import dataset
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--dataset", default="roomnav-v1", help="dataset name under houses/ or a folder")
+    p.add_argument("--dataset", default=dataset.CANONICAL,
+                   help="dataset name under houses/ or a folder (default %(default)s)")
     p.add_argument("--split", choices=["valid", "test"], action="append",
                    help="split(s) to write (default: valid and test)")
     p.add_argument("--per-length", type=int, default=None,
                    help="episodes per plan length 1..5 (default: 100 for valid, 500 for test)")
+    p.add_argument("--hops", action="store_true",
+                   help="write the hop episodes (starts 1 and 2 doors from every graph node) instead")
+    p.add_argument("--per-node", type=int, default=None,
+                   help="with --hops: starts per node and door distance (default: 20 for valid, 30 for test)")
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
-    if args.per_length is not None and args.per_length < 1:
-        p.error(f"--per-length {args.per_length}: expected a positive integer")
+    for flag, value in (("--per-length", args.per_length), ("--per-node", args.per_node)):
+        if value is not None and value < 1:
+            p.error(f"{flag} {value}: expected a positive integer")
+    if args.per_node is not None and not args.hops:
+        p.error("--per-node needs --hops")
     for split in args.split or ["valid", "test"]:
         t0 = time.time()
-        n = args.per_length or (500 if split == "test" else 100)
-        eps, counts = episodes.generate(args.dataset, split, per_length=n, seed=args.seed)
-        path = episodes.episodes_path(args.dataset, split)
+        if args.hops:
+            n = args.per_node or (30 if split == "test" else 20)
+            eps, counts = episodes.generate_hops(args.dataset, split, per_node=n, seed=args.seed)
+            path = episodes.episodes_path(args.dataset, split, "hops")
+            summary = "; ".join(f"{node} " + " / ".join(f"{c['episodes']} in {c['houses']} houses"
+                                                        for c in per_d.values()) for node, per_d in counts.items())
+            note = f"per node (1 / 2 doors): {summary}"
+        else:
+            n = args.per_length or (500 if split == "test" else 100)
+            eps, counts = episodes.generate(args.dataset, split, per_length=n, seed=args.seed)
+            path = episodes.episodes_path(args.dataset, split)
+            missing = [k for k, v in counts.items() if v == 0]
+            note = f"per plan length {counts}" + (f"; no house offers plan lengths {missing}" if missing else "")
         episodes.write(path, eps)
-        missing = [k for k, v in counts.items() if v == 0]
-        print(f"{split}: {len(eps)} episodes -> {path} in {time.time() - t0:.1f} s; per plan length {counts}"
-              + (f"; no house offers plan lengths {missing}" if missing else ""))
+        print(f"{split}: {len(eps)} episodes -> {path} in {time.time() - t0:.1f} s; {note}")
     return 0
 
 

@@ -1,12 +1,13 @@
 #!/usr/bin/env python
 """Generates a RoomNav-MJ house dataset: MJCF + metadata per house, and a manifest.
 
-    python tools/make_houses.py                      # the canonical houses/roomnav-v1 (200/20/50, seed 0)
+    python tools/make_houses.py                      # the canonical houses/roomnav-v2 (200/30/100, seed 0)
     python tools/make_houses.py --out /tmp/h --train 10 --valid 0 --test 5 --seed 3 --preview
 
 Writes DIR/{train,valid,test}/<id>.xml + <id>.json, DIR/manifest.json (sha256 of
-every house file) and, with --preview, DIR/preview/<id>.png. Same arguments,
-same bytes.
+every house file) and, with --preview [SPLIT ...], DIR/preview/<id>.png for the
+houses of those splits (all splits when none is named; the canonical dataset
+ships the test split's). Same arguments, same bytes.
 """
 
 import argparse
@@ -54,7 +55,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--test", type=_count, default=canon["test"], help="test houses (default %(default)s)")
     p.add_argument("--seed", type=_count, default=dataset.CANONICAL_SEED, help="dataset seed (default %(default)s)")
     p.add_argument("--name", default=None, help="dataset name in the manifest (default: the folder name)")
-    p.add_argument("--preview", action="store_true", help="also write a top-down PNG per house under DIR/preview/")
+    p.add_argument("--preview", nargs="*", choices=dataset.SPLITS, metavar="SPLIT",
+                   help="also write a top-down PNG per house of these splits (default: none; "
+                        "no SPLIT: every split) under DIR/preview/")
     p.add_argument("--workers", type=_positive, default=1, help="generator processes (default %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = p.parse_args(argv)
@@ -70,13 +73,20 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
+def _preview_splits(value: list[str] | None) -> tuple[str, ...]:
+    """The splits to preview: ``--preview`` absent → none, bare → all, else the named ones."""
+    if value is None:
+        return ()
+    return tuple(value) or dataset.SPLITS
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     start = time.perf_counter()
     try:
         manifest = dataset.write_dataset(
             args.out, {"train": args.train, "valid": args.valid, "test": args.test}, seed=args.seed,
-            name=args.name, preview=args.preview, workers=args.workers, progress=not args.quiet,
+            name=args.name, preview=_preview_splits(args.preview), workers=args.workers, progress=not args.quiet,
             log=lambda m: print(m, file=sys.stderr),
         )
     except (OSError, ValueError, RuntimeError) as e:

@@ -13,33 +13,63 @@ OSMesa when unset); a clear error lists what was tried when none works.
 
 from __future__ import annotations
 
+import atexit
 import os
+import weakref
 
 import mujoco
 import numpy as np
 
+from leaps_mj.environment import gl_backend
 from leaps_mj.world import mjcf as house_mjcf
 
+RenderError = gl_backend.RenderError
 
-class RenderError(RuntimeError):
-    """No off-screen OpenGL context could be created."""
+#: Objects holding GL resources that are still open (environments, renderers owning a context).
+_OPEN: weakref.WeakSet = weakref.WeakSet()
+
+
+def track(holder) -> None:
+    """Closes ``holder`` (anything with ``close()``) at interpreter exit if it is still open then.
+
+    Without this, an environment left open in a reference cycle is freed by
+    the final garbage collection, after PyOpenGL has begun to unload, and
+    ``GLContext.__del__`` prints an EGL traceback.
+    """
+    _OPEN.add(holder)
+
+
+def _close_open() -> None:
+    for holder in list(_OPEN):
+        try:
+            holder.close()
+        except Exception:  # noqa: BLE001 - best effort at exit; nothing left to report to
+            pass
 
 
 def make_context(width: int, height: int) -> "mujoco.GLContext":
     """An off-screen GL context for the backend in ``MUJOCO_GL``.
 
     Raises:
-      RenderError: naming the backend tried and how to pick another.
+      RenderError: naming the backend tried, the library missing and the package that provides it.
     """
+    if gl_backend.problem() is not None:
+        raise RenderError(gl_backend.problem())
     backend = os.environ.get("MUJOCO_GL", "")
     try:
         ctx = mujoco.GLContext(width, height)
         ctx.make_current()
+        # After the backend's own exit hooks (MuJoCo's EGL backend terminates its display at exit,
+        # registered with the first context): exit hooks run last-in first-out, so this one closes
+        # what is open while the display still works.
+        atexit.unregister(_close_open)
+        atexit.register(_close_open)
     except Exception as e:  # noqa: BLE001 - backend errors come in many types
         raise RenderError(
             f"could not create an off-screen OpenGL context with MUJOCO_GL={backend!r} ({e}); "
-            "tried that backend only: set MUJOCO_GL=egl (Mesa or NVIDIA libEGL) or MUJOCO_GL=osmesa "
-            "(apt-get install libosmesa6) before importing leaps_mj"
+            "tried that backend only: set MUJOCO_GL=egl (Mesa or NVIDIA libEGL; Debian: apt-get install "
+            f"{gl_backend.LIBRARIES['egl'][1]}) or MUJOCO_GL=osmesa (Debian: apt-get install "
+            f"{gl_backend.LIBRARIES['osmesa'][1]}) before importing leaps_mj"
         ) from e
     return ctx
 
@@ -71,6 +101,8 @@ class SegDepthRenderer:
         model.vis.global_.offwidth, model.vis.global_.offheight = width, height
         self._owns_ctx = context is None
         self._ctx = make_context(width, height) if context is None else context
+        if self._owns_ctx:
+            track(self)
         self._ctx.make_current()
         self._mjr = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._mjr)

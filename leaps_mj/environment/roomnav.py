@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import functools
 import json
 import math
 import pathlib
@@ -43,6 +42,7 @@ from dm_control.suite import base
 from dm_env import specs
 
 from leaps_mj.environment import batching, render
+from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import houses, navgrid, rooms
 
 _SUBSTEP = 0.1  # metres per collision-checked increment of a move
@@ -197,6 +197,7 @@ class HouseModel:
                              rooms.room_index(r.type)) for r in indoor)
         self._has_yard = any(r.type == "outdoor" for r in house.rooms)
         self._distance_maps: dict[str, np.ndarray] = {}
+        self._plan_lengths: dict[str, dict[int, int]] = {}
 
     def semantic_bits(self, x: float, y: float) -> np.ndarray:
         """Room-type bits of a point: one per type of the rooms it is in.
@@ -245,27 +246,11 @@ class HouseModel:
         """Id of the room containing a point (-1 outside the lot)."""
         return int(self.grid.room_id[self.grid.to_cell(xy)])
 
-    @functools.cached_property
-    def room_graph(self) -> dict[int, set[int]]:
-        adj = collections.defaultdict(set)
-        for a, b in self.house.connectivity():
-            adj[a].add(b)
-            adj[b].add(a)
-        return adj
-
     def plan_length(self, room_id: int, target: str) -> int | None:
-        """Fewest room-to-room hops from a room to a room of type ``target``."""
-        goal = {r.id for r in self.house.rooms if r.type == target}
-        if room_id in goal:
-            return 0
-        frontier, seen, hops = {room_id}, {room_id}, 0
-        while frontier:
-            hops += 1
-            frontier = {j for i in frontier for j in self.room_graph[i]} - seen
-            if frontier & goal:
-                return hops
-            seen |= frontier
-        return None
+        """Fewest room-to-room hops from a room to a room of type ``target`` (None: unreachable)."""
+        if target not in self._plan_lengths:
+            self._plan_lengths[target] = self.house.plan_lengths(target)
+        return self._plan_lengths[target].get(room_id)
 
 
 class Physics(dm_mujoco.Physics):
@@ -492,6 +477,7 @@ class RoomNavEnvironment(control.Environment):
         self._house_files = {p.stem: p for p in house_files}
         self._cache: collections.OrderedDict[str, tuple] = collections.OrderedDict()
         self._gl = render.make_context(config.width, config.height)
+        render.track(self)
         self.renderer = None
         self.segment_luts = None
         self._task = RoomNav(self, config, random=seed)
@@ -554,6 +540,12 @@ class RoomNavEnvironment(control.Environment):
         self._task.episode = spec
         return super().reset()
 
+    def seed(self, seed: int) -> None:
+        """Reseeds the task's RNG (episode sampling), e.g. for gymnasium's ``reset(seed=...)``."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed {seed!r}: expected an integer >= 0")
+        self._task._random = np.random.RandomState(int(seed))  # noqa: SLF001 - dm_control keeps no setter
+
     def reset_to(self, spec: EpisodeSpec | dict):
         """Starts the given episode (house id, start pose, target type)."""
         if isinstance(spec, dict):
@@ -611,7 +603,7 @@ class RoomNavEnvironment(control.Environment):
             self._gl = None
 
 
-def load(dataset: str = "roomnav-v1", split: str = "train", seed=0, houses_dir=None, **config) -> RoomNavEnvironment:
+def load(dataset: str = dataset_lib.CANONICAL, split: str = "train", seed=0, houses_dir=None, **config) -> RoomNavEnvironment:
     """Builds a RoomNav environment over a split of a house dataset.
 
     Args:
@@ -634,7 +626,5 @@ def load(dataset: str = "roomnav-v1", split: str = "train", seed=0, houses_dir=N
         if not files:
             raise ValueError(f"no house files (*.json) in {str(houses_dir)!r}")
     else:
-        from leaps_mj.world import dataset as dataset_lib
-
         files = dataset_lib.list_houses(dataset, split)
     return RoomNavEnvironment(files, cfg, seed=seed)

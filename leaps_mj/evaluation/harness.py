@@ -29,20 +29,29 @@ Agent ``aug`` (the semantic-augmented policy μ_s) always runs the shipped
 learned μ_s (``leaps_mj.learning.policies.load_augmented()``), whatever
 ``--subpolicy`` says; ``controller`` and ``leaps*`` use ``--subpolicy``.
 
-``--subset quick`` (20 episodes per plan length, 100 on roomnav-v1's test
+``--subset quick`` (20 episodes per plan length, 100 on the canonical test
 split: the README's main job) is the fixed subset for a short run; ``--subset smoke`` (2 per plan length) checks the
 pipeline in seconds.
+
+``--backend ray [--ray-address ADDR] [--workers N]`` runs the same chunks
+on Ray actors across a cluster (:mod:`leaps_mj.evaluation.backends`,
+docs/ray.md); the CSVs are byte-identical to the local backend's.
+
+The hop benchmark of the sub-policies alone (:mod:`leaps_mj.evaluation.hops`,
+``python -m leaps_mj.evaluation.hops``) runs on this machinery with the hop
+episodes (``EvalConfig.episodes = "hops"``) and any checkpoint folder
+(``EvalConfig.policy_dir``).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import dataclasses
 import io
 import json
 import math
-import multiprocessing
 import pathlib
 import sys
 
@@ -52,7 +61,7 @@ import tqdm
 
 from leaps_mj.environment import episodes as episodes_lib
 from leaps_mj.environment import roomnav
-from leaps_mj.evaluation import registry
+from leaps_mj.evaluation import backends, registry
 from leaps_mj.planning import agents as agents_lib
 from leaps_mj.planning import semantic
 from leaps_mj.records import recorder as record_lib
@@ -114,6 +123,10 @@ class EvalConfig:
       prior: the LEAPS prior (see :func:`leaps_mj.planning.agents.load_model`).
       replan_every: LEAPS's N.
       seed: base seed of the episodes' agents.
+      episodes: the fixed episode set (a key of
+        :data:`leaps_mj.environment.episodes.EPISODE_SETS`: "plan_length" or "hops").
+      policy_dir: with ``subpolicy="learned"``, a folder of sub-policy
+        checkpoints (``<node>.pt``) to run instead of the shipped ones.
     """
 
     dataset: str = dataset_lib.CANONICAL
@@ -123,12 +136,35 @@ class EvalConfig:
     prior: str = agents_lib.DEFAULT_PRIOR
     replan_every: int = 30
     seed: int = 0
+    episodes: str = "plan_length"
+    policy_dir: str | None = None
 
     def __post_init__(self):
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
             raise ValueError(f"horizon {self.horizon!r}: expected a positive integer")
         if self.subpolicy not in ("local", "learned"):
             raise ValueError(f"subpolicy {self.subpolicy!r}: expected 'local' or 'learned'")
+        if self.episodes not in episodes_lib.EPISODE_SETS:
+            raise ValueError(f"episodes {self.episodes!r}: expected one of {list(episodes_lib.EPISODE_SETS)}")
+        if self.policy_dir is not None and self.subpolicy != "learned":
+            raise ValueError(f"policy_dir {self.policy_dir!r} needs subpolicy 'learned', not {self.subpolicy!r}")
+
+    def to_json(self) -> dict:
+        """The settings as ``config.json`` holds them.
+
+        Fields added after the first results were written (:data:`LATER_FIELDS`)
+        are left out at their defaults, so those folders stay valid and a
+        rerun writes the same bytes.
+        """
+        out = dataclasses.asdict(self)
+        for name, default in LATER_FIELDS.items():
+            if out[name] == default:
+                del out[name]
+        return out
+
+
+#: Fields of :class:`EvalConfig` newer than the committed results, with their defaults.
+LATER_FIELDS = {"episodes": "plan_length", "policy_dir": None}
 
 
 # -- workers -----------------------------------------------------------------
@@ -155,15 +191,31 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, recor
     _WORKER["config"] = config
     _WORKER["env"] = roomnav.load(config.dataset, config.split, seed=config.seed, reward="sparse",
                                    horizon=config.horizon)
-    _WORKER["specs"] = episodes_lib.load_split(config.dataset, config.split)
+    _WORKER["specs"] = episodes_lib.load_split(config.dataset, config.split, config.episodes)
     _WORKER["model"] = model
     _WORKER["record"] = record
     _WORKER["recorders"] = {}
     _WORKER["subpolicy"] = None
     if config.subpolicy == "learned":
-        from leaps_mj.learning import policies
+        _WORKER["subpolicy"] = learned_subpolicy(config.policy_dir)
 
-        _WORKER["subpolicy"] = policies.load_default()
+
+def learned_subpolicy(policy_dir: str | None):
+    """The learned sub-policies: the shipped ones, or every ``<node>.pt`` checkpoint in ``policy_dir``.
+
+    Raises:
+      ValueError: if the folder holds no checkpoint of a graph node, or one is unreadable.
+    """
+    from leaps_mj.learning import policies
+    from leaps_mj.world import rooms
+
+    if policy_dir is None:
+        return policies.load_default()
+    targets = [t for t in rooms.GRAPH_NODES if (pathlib.Path(policy_dir) / f"{t}.pt").is_file()]
+    if not targets:
+        raise ValueError(f"policy folder {policy_dir!r} holds no sub-policy checkpoint <node>.pt "
+                         f"for any of {list(rooms.GRAPH_NODES)}")
+    return policies.LearnedSubPolicy(policy_dir, targets)
 
 
 def _build_agent(spec: AgentSpec, seed: int):
@@ -196,7 +248,7 @@ def _observer(label: str):
     folder, mode = _WORKER["record"]
     recorders = _WORKER["recorders"]
     if label not in recorders:
-        run_config = {**dataclasses.asdict(_WORKER["config"]), "agent": label}
+        run_config = {**_WORKER["config"].to_json(), "agent": label}
         recorders[label] = record_lib.recorder_for_evaluation(folder / label, mode, seed=_WORKER["config"].seed,
                                                               run_config=run_config)
     return recorders[label]
@@ -269,38 +321,64 @@ def _check_config(out: pathlib.Path, config: EvalConfig) -> None:
     path = out / "config.json"
     current = dataclasses.asdict(config)
     if path.is_file():
-        saved = json.loads(path.read_text())
+        saved = {**LATER_FIELDS, **json.loads(path.read_text())}
         diff = {k: (saved.get(k), v) for k, v in current.items() if saved.get(k) != v}
         if diff:
             raise ValueError(f"{str(out)!r} holds results made with other settings (saved, now): {diff}; "
                              "use another --out folder")
         return
-    dataset_lib.write_atomic(path, (json.dumps(current, indent=1) + "\n").encode())
+    dataset_lib.write_atomic(path, (json.dumps(config.to_json(), indent=1) + "\n").encode())
 
 
-def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: int = 1, chunk: int = 4,
+@contextlib.contextmanager
+def _results(where: backends.Backend, jobs: list, config: EvalConfig, model, record):
+    """``(spec, rows)`` of every job as it finishes: in this process, or on ``where``'s workers."""
+    if not where.in_process(len(jobs)):
+        with backends.worker_pool(where, _init_worker, (config, model, record, 1), len(jobs)) as pool:
+            yield pool.imap_unordered(_run_chunk, jobs)
+        return
+    if jobs:
+        _init_worker(config, model, record)
+    try:
+        yield map(_run_chunk, jobs)
+    finally:
+        if "env" in _WORKER:
+            _WORKER.pop("env").close()  # frees its GL context before interpreter exit
+
+
+def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: int | None = 1, chunk: int = 4,
         progress: bool = True, model: semantic.SemanticModel | None = None,
-        record: tuple[pathlib.Path, str] | None = None) -> dict[str, list[dict]]:
+        record: tuple[pathlib.Path, str] | None = None, backend: str = "local",
+        ray_address: str | None = None) -> dict[str, list[dict]]:
     """Runs every agent on the selected episodes, resuming from the CSVs in ``out``.
+
+    The same jobs (chunks of one agent's episodes) run on either backend, and
+    every finished chunk is merged into its agent's CSV sorted by episode, so
+    the files' bytes depend neither on the backend nor on the workers.
 
     Args:
       config: shared settings (checked against ``out/config.json``).
       agent_specs: the :class:`AgentSpec` s to run.
       indices: episode indices (see :func:`select_episodes`).
       out: result folder.
-      workers: processes (1: in this process).
+      workers: processes or Ray actors (see :class:`leaps_mj.evaluation.backends.Backend`;
+        1 locally: in this process).
       chunk: episodes per job; the CSV is rewritten after each.
       progress: show a tqdm bar.
       model: the LEAPS semantic model; None loads ``config.prior`` (then
         ``config.prior`` may name anything identifying the model, e.g. a hash).
       record: ``(folder, mode)`` to write MCAP records of the episodes run to
-        ``folder/<agent>/`` (mode: all, failures or sample:K), or None.
+        ``folder/<agent>/`` (mode: all, failures or sample:K), or None. On a
+        cluster the folder must be shared by the nodes.
+      backend: "local" or "ray" (:mod:`leaps_mj.evaluation.backends`).
+      ray_address: with ``backend="ray"``, the cluster to run on (None: a local Ray instance).
 
     Returns:
       label -> rows of the selected episodes, sorted by episode.
     """
-    if workers < 1 or chunk < 1:
-        raise ValueError(f"workers {workers!r} and chunk {chunk!r}: expected positive integers")
+    where = backends.Backend(backend, workers, ray_address)
+    if chunk < 1:
+        raise ValueError(f"chunk {chunk!r}: expected a positive integer")
     labels = [s.label for s in agent_specs]
     if len(set(labels)) != len(labels):
         raise ValueError(f"agent labels {labels} are not unique")
@@ -312,28 +390,12 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
         done = {r["episode"] for r in read_rows(csv_path(out, spec.label))}
         todo = [i for i in indices if i not in done]
         jobs += [(spec, todo[k:k + chunk]) for k in range(0, len(todo), chunk)]
-    total = sum(len(j[1]) for j in jobs)
-    if workers > 1 and len(jobs) > 1:
-        pool = multiprocessing.get_context("spawn").Pool(min(workers, len(jobs)), _init_worker,
-                                                         (config, model, record, 1))
-        results = pool.imap_unordered(_run_chunk, jobs)
-    else:
-        pool = None
-        if jobs:
-            _init_worker(config, model, record)
-        results = map(_run_chunk, jobs)
-    try:
-        with tqdm.tqdm(total=total, desc="evaluate: episodes", disable=not progress) as bar:
-            for spec, rows in results:
-                append_rows(csv_path(out, spec.label), rows)
-                bar.update(len(rows))
-                bar.set_postfix_str(spec.label)
-    finally:
-        if pool is not None:
-            pool.terminate()
-            pool.join()
-        elif "env" in _WORKER:
-            _WORKER.pop("env").close()  # frees its GL context before interpreter exit
+    with _results(where, jobs, config, model, record) as results, \
+            tqdm.tqdm(total=sum(len(j[1]) for j in jobs), desc="evaluate: episodes", disable=not progress) as bar:
+        for spec, rows in results:
+            append_rows(csv_path(out, spec.label), rows)
+            bar.update(len(rows))
+            bar.set_postfix_str(spec.label, refresh=False)
     table = {}
     for label in labels:
         rows = [r for r in read_rows(csv_path(out, label)) if r["episode"] in selected]
@@ -355,6 +417,28 @@ def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, flo
         return math.nan, math.nan
     ci = scipy.stats.binomtest(int(successes), int(n)).proportion_ci(confidence, method="wilson")
     return float(ci.low), float(ci.high)
+
+
+def paired_test(a: np.ndarray, b: np.ndarray) -> dict:
+    """Exact McNemar (sign) test of two agents' successes on the same episodes.
+
+    Only the discordant episodes count: under "no difference" each is as
+    likely to be won by either agent, so their split is Binomial(n, 1/2).
+
+    Returns:
+      ``{"n", "a", "b", "a_only", "b_only", "p"}``: episodes, successes of each,
+      episodes only one of them solved, and the two-sided p-value (1 without discordant episodes).
+
+    Raises:
+      ValueError: if the arrays differ in shape.
+    """
+    a, b = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
+    if a.shape != b.shape:
+        raise ValueError(f"paired successes of shapes {a.shape} and {b.shape}: expected the same episodes")
+    a_only, b_only = int((a & ~b).sum()), int((b & ~a).sum())
+    p = scipy.stats.binomtest(a_only, a_only + b_only, 0.5).pvalue if a_only + b_only else 1.0
+    return {"n": int(a.size), "a": int(a.sum()), "b": int(b.sum()), "a_only": a_only, "b_only": b_only,
+            "p": float(p)}
 
 
 def rate(mask: np.ndarray) -> dict:
@@ -518,7 +602,7 @@ def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: path
     n = max((len(rows) for rows in table.values()), default=0)
     dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, n).encode())
     dataset_lib.write_atomic(out / "summary.json", (json.dumps(
-        {"config": dataclasses.asdict(config), "horizons": list(horizons), "episodes": n, "success": summary},
+        {"config": config.to_json(), "horizons": list(horizons), "episodes": n, "success": summary},
         indent=1) + "\n").encode())
     plot(summary, horizons, out)
     return summary
@@ -541,7 +625,7 @@ def main(argv=None) -> int:
                    help=f"episodes per plan length: {SUBSETS}")
     p.add_argument("--episodes-per-length", type=int, default=None, help="overrides --subset")
     p.add_argument("--limit", type=int, default=None, help="only the first N selected episodes")
-    p.add_argument("--workers", type=int, default=1)
+    backends.add_arguments(p)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--record", type=pathlib.Path, metavar="DIR",
@@ -551,6 +635,7 @@ def main(argv=None) -> int:
     horizons = sorted(set(args.horizon))
     if horizons[0] < 1:
         p.error(f"--horizon {args.horizon}: expected positive integers")
+    where = backends.from_arguments(p, args)
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
                             prior=args.prior, replan_every=args.replan_every, seed=args.seed)
@@ -561,9 +646,9 @@ def main(argv=None) -> int:
         specs = episodes_lib.load_split(args.dataset, args.split)
         per_length = args.episodes_per_length or SUBSETS[args.subset]
         indices = episodes_lib.select_episodes(specs, per_length, args.limit, args.seed)
-        table = run(config, [AGENTS[a] for a in args.agent], indices, args.out, workers=args.workers,
-                    progress=not args.no_progress,
-                    record=(args.record, args.record_mode) if args.record else None)
+        table = run(config, [AGENTS[a] for a in args.agent], indices, args.out, workers=where.workers,
+                    progress=not args.no_progress, record=(args.record, args.record_mode) if args.record else None,
+                    backend=where.name, ray_address=where.address)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -10,6 +10,7 @@ import dataclasses
 import math
 
 from leaps_mj.learning import nets
+from leaps_mj.world import dataset as dataset_lib
 
 METHODS = ("a2c", "dagger", "dagger+a2c")
 
@@ -62,7 +63,7 @@ class TrainConfig:
       seed: Seed of every random draw of the run.
     """
 
-    dataset: str = "roomnav-v1"
+    dataset: str = dataset_lib.CANONICAL
     num_houses: int = 0
     width: int = 120
     height: int = 90

@@ -270,7 +270,7 @@ def main(argv=None) -> int:
     p.add_argument("--preset", choices=sorted(PRESETS), default="cpu",
                    help="tiny: 3 houses x 2 trials; cpu: all houses x 10 trials; paper: x 50 trials")
     p.add_argument("--out", type=pathlib.Path, default=None, help="output folder (default runs/prior_<preset>)")
-    p.add_argument("--dataset", default=None, help="dataset name or folder (default roomnav-v1)")
+    p.add_argument("--dataset", default=None, help=f"dataset name or folder (default {dataset_lib.CANONICAL})")
     p.add_argument("--houses", type=int, default=None, help="explore only the first N houses")
     p.add_argument("--trials", type=int, default=None, help="runs per present room type per house")
     p.add_argument("--seed", type=int, default=None)

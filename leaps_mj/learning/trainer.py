@@ -259,7 +259,7 @@ class Trainer:
                             writer.add_scalar(f"{group}/{key}", value, step)
                     log.write(row)
                     bar.update(1)
-                    bar.set_postfix(self.postfix(row))
+                    bar.set_postfix(self.postfix(row), refresh=False)
                     if self.iteration % self.checkpoint_every == 0 or self.iteration == stop:
                         self.save()
         finally:

@@ -73,10 +73,15 @@ class Agent(Protocol):
         """``{"subtarget": str | None, "plan": list[str], "belief": np.ndarray | None}``."""
 
 
-def _check_target(target: str) -> str:
-    """A target room type (one of :data:`rooms.ROOM_TYPES`), or ValueError."""
-    if target not in rooms.ROOM_TYPES:
-        raise ValueError(f"unknown target {target!r}; expected one of {list(rooms.ROOM_TYPES)}")
+def _check_target(target: str, allowed: tuple[str, ...] = rooms.ROOM_TYPES) -> str:
+    """A target among ``allowed`` (default the room types :data:`rooms.ROOM_TYPES`), or ValueError.
+
+    Agents that only run one sub-policy or the expert also take the untyped
+    ``indoor`` node (``allowed=rooms.GRAPH_NODES``): the hop benchmark measures
+    the hallway hops LEAPS plans through.
+    """
+    if target not in allowed:
+        raise ValueError(f"unknown target {target!r}; expected one of {list(allowed)}")
     return target
 
 
@@ -94,7 +99,7 @@ class RandomAgent:
         self.target: str | None = None
 
     def reset(self, target: str) -> None:
-        self.target = _check_target(target)
+        self.target = _check_target(target, rooms.GRAPH_NODES)
 
     def step(self, timestep) -> int:
         del timestep
@@ -118,7 +123,7 @@ class PureAgent:
         self.target: str | None = None
 
     def reset(self, target: str) -> None:
-        self.target = _check_target(target)
+        self.target = _check_target(target, rooms.GRAPH_NODES)
         self.subpolicy.reset(target)
 
     def step(self, timestep) -> int:
@@ -143,7 +148,7 @@ class OracleAgent:
         self.target: str | None = None
 
     def reset(self, target: str) -> None:
-        self.target = _check_target(target)
+        self.target = _check_target(target, rooms.GRAPH_NODES)
         self.expert.reset()
 
     def step(self, timestep) -> int:

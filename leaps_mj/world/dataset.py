@@ -24,7 +24,7 @@ import os
 import pathlib
 import re
 import tempfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 
 import numpy as np
 
@@ -35,9 +35,11 @@ SPLITS = ("train", "valid", "test")
 #: Version of the dataset layout and manifest.
 DATASET_FORMAT_VERSION = 1
 MANIFEST = "manifest.json"
-#: The canonical dataset and the arguments that generate it.
-CANONICAL = "roomnav-v1"
-CANONICAL_COUNTS = {"train": 200, "valid": 20, "test": 50}
+#: The canonical dataset and the arguments that generate it (the generator's
+#: current code makes it; ``roomnav-v1``, 200 / 20 / 50 houses of the
+#: single-corridor generator, stays as committed data).
+CANONICAL = "roomnav-v2"
+CANONICAL_COUNTS = {"train": 200, "valid": 30, "test": 100}
 CANONICAL_SEED = 0
 #: Repository folder holding the shipped datasets.
 HOUSES_DIR = rooms.REPO_DIR / "houses"
@@ -158,7 +160,7 @@ def write_dataset(
     counts: dict[str, int],
     seed: int = 0,
     name: str | None = None,
-    preview: bool = False,
+    preview: Collection[str] = (),
     workers: int = 1,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
@@ -175,7 +177,9 @@ def write_dataset(
       counts: houses per split, e.g. ``{"train": 200, "valid": 20, "test": 50}``.
       seed: the dataset seed (>= 0).
       name: dataset name recorded in the manifest (default: the folder name).
-      preview: also write ``preview/<id>.png``.
+      preview: splits whose houses also get a top-down ``preview/<id>.png``
+        (for instance ``("test",)``: pictures of every house would be too
+        large to commit).
       workers: processes generating houses (1: in this process).
       progress: show a tqdm progress bar.
       log: called with one line per notable event (stale files removed).
@@ -197,13 +201,16 @@ def write_dataset(
         raise ValueError(f"output path {str(out)!r} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     name = name or out.resolve().name
-    preview_dir = out / "preview" if preview else None
+    preview = tuple(preview)
+    for split in preview:
+        _check_split(split)
+    preview_dir = out / "preview"
 
     seeds = {s: [house_seed(seed, s, i) for i in range(counts[s])] for s in SPLITS}
     flat = [v for s in SPLITS for v in seeds[s]]
     if len(set(flat)) != len(flat):  # 32-bit seeds: a collision is astronomically rare
         raise RuntimeError(f"dataset seed {seed} gives two houses the same generator seed")
-    jobs = [(seed, s, i, None if preview_dir is None else str(preview_dir))
+    jobs = [(seed, s, i, str(preview_dir) if s in preview else None)
             for s in SPLITS for i in range(counts[s])]
 
     files: dict[str, str] = {}
@@ -256,7 +263,7 @@ def write_dataset(
     return manifest
 
 
-def _stale_files(out: pathlib.Path, counts: dict[str, int], preview: bool) -> list[pathlib.Path]:
+def _stale_files(out: pathlib.Path, counts: dict[str, int], preview: tuple[str, ...]) -> list[pathlib.Path]:
     keep = {house_id(s, i) for s in SPLITS for i in range(counts[s])}
     stale = []
     for s in SPLITS:
@@ -265,7 +272,7 @@ def _stale_files(out: pathlib.Path, counts: dict[str, int], preview: bool) -> li
                 stale.append(p)
     if preview and (out / "preview").is_dir():
         for p in sorted((out / "preview").glob("*.png")):
-            if _ID_RE.match(p.stem) and p.stem not in keep:
+            if _ID_RE.match(p.stem) and (p.stem not in keep or p.stem.split("_")[0] not in preview):
                 stale.append(p)
     return stale
 

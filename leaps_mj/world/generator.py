@@ -5,22 +5,21 @@ A house is generated in four deterministic stages from one integer seed:
 1. **Programme.** Which room types the house has and how many, drawn with the
    per-house frequencies of real homes (the original LEAPS release's SUNCG
    training houses: every house has a kitchen, 94 % a bathroom, 63 % a living
-   room, …).
-2. **Floor plan.** A "double-loaded corridor" plan, the commonest plan of real
-   single-storey homes: a hallway (untyped indoor space) runs along the house
-   with a row of rooms on each side; a living room may span the full depth at
-   one end and a garage at the other. The public rooms are placed in the chain
-   kitchen – dining room – living room, the office next to the living room and
-   bedrooms alternate with bathrooms in the private wing, so the room graph has
-   the regularities of real homes. Room sizes vary per type; half of the
-   houses have a stepped outline; an entry foyer is added when both ends of
-   the hallway are taken.
-3. **Doors.** A room opens to the hallway it sits on with a probability by
-   type (``_HALL_DOOR_P``); neighbouring rooms share a door with a probability
-   by type pair (``_DOOR_P``: kitchen–dining high, bedroom–garage never); a
-   repair step connects any room left unreachable. A yard of outdoor space
-   surrounds the house, reached by a front door, an optional back door and
-   the garage's side door (a garage may be reached from the yard only).
+   room, …), plus the untyped rooms (closets, a mudroom beside the garage).
+2. **Floor plan** (:mod:`leaps_mj.world.floorplan`). Double-loaded corridors,
+   the commonest plan of real single-storey homes: a hallway with a row of
+   rooms on each side, turned into an L with a second hallway and a bedroom
+   wing in larger homes; the public chain kitchen – dining room – living room
+   in one row, bedrooms alternating with bathrooms, the garage at one end
+   behind a mudroom.
+3. **Doors.** A room opens to a hallway it sits on with a probability by
+   kind (``_HALL_DOOR_P``); neighbouring rooms share a door with a probability
+   by kind or type pair (``_DOOR_P``: kitchen–dining high, mudroom–garage
+   high, bedroom–garage never); a repair step connects any room left
+   unreachable to its likeliest neighbour, so suites stay reached through a
+   neighbour. A yard of outdoor space surrounds the house, reached by a front
+   door, an optional back door and, in some houses, the garage's side door
+   (a garage may also be reached from the yard only).
 4. **Furniture** (:mod:`leaps_mj.world.furnish`). Items from the catalogue ``assets/furniture.json`` (boxes,
    cylinders, ellipsoids), placed against walls or free-standing, never in a
    door's clearance zone; every room stays reachable for a cylinder agent of
@@ -37,11 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from leaps_mj.world import furnish, navgrid, rooms
+from leaps_mj.world import floorplan, furnish, navgrid, rooms
 from leaps_mj.world.houses import Door, House, Room, Wall
 
-#: Door probability between two rooms that share a wall, by type pair (the
-#: hallway's doors are in ``_HALL_DOOR_P``). Unlisted pairs get
+#: Door probability between two rooms that share a wall, by kind pair or, for
+#: kinds not listed, by type pair (untyped kinds are ``indoor``; the
+#: hallways' doors are in ``_HALL_DOOR_P``). Unlisted pairs get
 #: ``_DEFAULT_DOOR_P``. Keys are normalised to sorted order below.
 _DOOR_P = {
     ("kitchen", "dining_room"): 0.9,
@@ -50,44 +50,47 @@ _DOOR_P = {
     ("kitchen", "living_room"): 0.5,
     ("bathroom", "bedroom"): 0.45,
     ("kitchen", "office"): 0.3,
-    ("dining_room", "office"): 0.2,
+    ("dining_room", "office"): 0.35,
+    ("garage", "mudroom"): 0.9,
+    ("kitchen", "mudroom"): 0.8,
     ("garage", "indoor"): 0.6,
     ("garage", "kitchen"): 0.35,
     ("indoor", "kitchen"): 0.3,
     ("indoor", "living_room"): 0.5,
     ("bathroom", "living_room"): 0.1,
+    ("living_room", "garage"): 0.0,
     ("bedroom", "garage"): 0.0,
     ("bathroom", "garage"): 0.0,
 }
 _DOOR_P = {tuple(sorted(k)): v for k, v in _DOOR_P.items()}
 _DEFAULT_DOOR_P = 0.05
-#: Door probability between the hallway and a room on it, by the room's type.
+#: Door probability between a hallway and a room on it, by the room's kind.
 #: Below 1, the room may be reached through a neighbour instead (a kitchen
-#: through the dining room, an en-suite bathroom through its bedroom); the
-#: connectivity repair adds the hallway door when it is not.
+#: through the dining room, an en-suite bathroom through its bedroom, the
+#: garage through the mudroom); the connectivity repair adds the hallway door
+#: when it is not.
 _HALL_DOOR_P = {
     "kitchen": 0.4,
-    "dining_room": 0.6,
+    "dining_room": 0.75,
     "living_room": 0.9,
-    "office": 0.5,
-    "bathroom": 0.55,
+    "office": 0.4,
+    "bathroom": 0.4,
     "bedroom": 1.0,
-    "garage": 0.55,
-    "indoor": 1.0,
+    "garage": 0.3,
+    "hallway": 1.0,
+    "foyer": 1.0,
+    "mudroom": 0.35,
+    "closet": 1.0,
 }
+#: Probability that a garage has no door into the house (reached from the
+#: yard alone), and that a garage entered from inside also has a side door to
+#: the yard (real garages often open only through the big garage door).
+_GARAGE_YARD_ONLY_P = 0.3
+_GARAGE_SIDE_DOOR_P = 0.25
 
-#: Width range (metres, along the row) per room type.
-_WIDTH = {
-    "kitchen": (3.0, 4.5),
-    "dining_room": (3.3, 4.5),
-    "living_room": (4.0, 6.0),
-    "office": (2.6, 3.6),
-    "bedroom": (3.0, 4.5),
-    "bathroom": (2.2, 3.0),
-    "indoor": (1.8, 2.6),
-    "foyer": (1.8, 2.4),
-    "garage": (3.8, 5.0),
-}
+#: Clearance radius (metres) every room must be reachable with: the agent's
+#: radius plus a margin for turning.
+_PASSAGE_RADIUS = rooms.AGENT_RADIUS + 0.15
 _MAX_TRIES = 40
 #: Layout attempts per sampled programme before a new programme is drawn.
 _LAYOUT_TRIES = 10
@@ -95,9 +98,18 @@ _LAYOUT_TRIES = 10
 _MIN_DOOR_WALL = rooms.DOOR_WIDTH + 0.5
 
 
-def door_probability(type_a: str, type_b: str) -> float:
-    """Probability that two rooms sharing a wall get a door, by type pair."""
-    key = tuple(sorted((type_a, type_b)))
+def door_probability(kind_a: str, kind_b: str) -> float:
+    """Probability that two rooms sharing a wall get a door, by kind pair.
+
+    Hallways use ``_HALL_DOOR_P`` (by the other room's kind); other pairs are
+    looked up by kind, then by type, then get ``_DEFAULT_DOOR_P``.
+    """
+    if "hallway" in (kind_a, kind_b):
+        return _HALL_DOOR_P[kind_b if kind_a == "hallway" else kind_a]
+    key = tuple(sorted((kind_a, kind_b)))
+    if key in _DOOR_P:
+        return _DOOR_P[key]
+    key = tuple(sorted((floorplan.room_type(kind_a), floorplan.room_type(kind_b))))
     return _DOOR_P.get(key, _DEFAULT_DOOR_P)
 
 
@@ -106,7 +118,12 @@ def door_probability(type_a: str, type_b: str) -> float:
 
 
 def sample_programme(rng: np.random.Generator) -> dict[str, int]:
-    """Number of rooms of each type, with real homes' per-house frequencies."""
+    """Number of rooms of each type, with real homes' per-house frequencies.
+
+    The presence of every target type keeps the frequencies of the reference's
+    houses (what the statistics compare); counts and untyped rooms
+    (``closet``, ``mudroom``) only make houses larger.
+    """
     prog = {t: 0 for t in rooms.ROOM_TYPES}
     prog["kitchen"] = 1
     prog["outdoor"] = int(rng.random() < 0.9)
@@ -114,129 +131,14 @@ def sample_programme(rng: np.random.Generator) -> dict[str, int]:
     prog["living_room"] = int(rng.random() < 0.64)
     prog["dining_room"] = int(rng.random() < 0.38)
     prog["office"] = int(rng.random() < 0.36)
-    prog["bedroom"] = 0 if rng.random() < 0.2 else int(rng.choice([1, 2, 3], p=[0.35, 0.4, 0.25]))
-    prog["bathroom"] = 0 if rng.random() < 0.06 else (1 if prog["bedroom"] <= 1 else int(rng.choice([1, 2])))
-    prog["indoor_extra"] = int(rng.random() < 0.35)  # closet / laundry / storage
+    prog["bedroom"] = 0 if rng.random() < 0.2 else int(rng.choice([1, 2, 3, 4], p=[0.3, 0.35, 0.25, 0.1]))
+    # One bathroom per bedroom or two (en-suites and a main bathroom), at least one.
+    n_bath = 1 if prog["bedroom"] <= 1 else int(rng.integers(prog["bedroom"] // 2, prog["bedroom"] // 2 + 2))
+    prog["bathroom"] = 0 if rng.random() < 0.06 else n_bath
+    prog["closet"] = int(rng.choice([0, 1, 2], p=[0.5, 0.35, 0.15]))
+    # A mudroom / laundry between kitchen and garage in most houses with a garage.
+    prog["mudroom"] = int(prog["garage"] and rng.random() < 0.7)
     return prog
-
-
-# --------------------------------------------------------------------------
-# Stage 2: floor plan.
-
-
-def _floor_plan(rng: np.random.Generator, prog: dict[str, int]) -> tuple[list[tuple[str, tuple]], dict]:
-    """Lays rooms out as rectangles around a central hallway.
-
-    Returns:
-      (rooms as (type, rect) with the hallway first, layout facts).
-    """
-    full_west = "living_room" if prog["living_room"] and rng.random() < 0.5 else None
-    public = [t for t in ("living_room", "dining_room", "kitchen") if prog[t] and t != full_west]
-    if rng.random() < 0.5:
-        public.reverse()
-    bedrooms = ["bedroom"] * prog["bedroom"]
-    baths = ["bathroom"] * prog["bathroom"]
-    private = []
-    while bedrooms or baths:
-        if bedrooms:
-            private.append(bedrooms.pop())
-        if baths:
-            private.append(baths.pop())
-    if prog["indoor_extra"]:
-        private.insert(int(rng.integers(0, len(private) + 1)), "indoor")
-    def width(t):
-        lo, hi = _WIDTH[t]
-        return float(rng.uniform(lo, hi))
-
-    # The office opens off the living room (commonest) or the kitchen, else
-    # it heads the other row. ``public`` starts at the west end (the
-    # full-depth living room, when there is one, is further west still).
-    north = list(public)
-    south = []
-    if prog["office"]:
-        u = rng.random()
-        if full_west and u < 0.7:
-            # Both rows start beside the full-depth living room.
-            (north if rng.random() < 0.5 else south).insert(0, "office")
-        elif "living_room" in north and u < 0.7:
-            north.insert(0 if north[0] == "living_room" else len(north), "office")
-        elif u < 0.85:
-            north.insert(0 if north[0] == "kitchen" else len(north), "office")
-        else:
-            south.append("office")
-    # A house whose hallway has no outside end (a full-depth living room at
-    # one end, the garage at the other) gets an entry foyer in the public row.
-    if full_west and prog["garage"]:
-        north.insert(int(rng.integers(1, len(north) + 1)), "foyer")
-    # Split the private wing to balance the row lengths.
-    nw = [width(t) for t in north]
-    sw = [width(t) for t in south]
-    pw = [width(t) for t in private]
-    for t, w in zip(private, pw):
-        if sum(nw) <= sum(sw):
-            north.append(t)
-            nw.append(w)
-        else:
-            south.append(t)
-            sw.append(w)
-    if not north:
-        north, nw = ["indoor"], [width("indoor")]
-    if not south:
-        south, sw = ["indoor"], [width("indoor")]
-    row_len = max(sum(nw), sum(sw))
-    # Stretch the shorter row; a large gap gets a storage room instead.
-    for names, ws in ((north, nw), (south, sw)):
-        gap = row_len - sum(ws)
-        if gap > 0.5 * sum(ws) and gap >= _WIDTH["indoor"][0]:
-            names.append("indoor")
-            ws.append(gap)
-        else:
-            scale = row_len / sum(ws)
-            ws[:] = [w * scale for w in ws]
-    if rng.random() < 0.5:
-        north, south, nw, sw = south, north, sw, nw
-
-    depth_s = float(rng.uniform(3.2, 4.8))
-    depth_n = float(rng.uniform(3.2, 4.8))
-    # Wide enough for a door at its ends (door plus 0.25 m each side).
-    hall = float(rng.uniform(1.5, 1.8))
-    depth = depth_s + hall + depth_n
-    x = 0.0
-    out: list[tuple[str, tuple]] = []
-    foyer = None
-    if full_west:
-        w = width(full_west) + 0.5
-        west_room = (full_west, (0.0, 0.0, w, depth))
-        x = w
-    hall_rect = (x, depth_s, x + row_len, depth_s + hall)
-    out.append(("indoor", hall_rect))
-    if full_west:
-        out.append(west_room)
-    # Half of the houses have a stepped outline: some rooms are shallower
-    # than their row, their outer wall set back (the yard fills the notch).
-    stepped = rng.random() < 0.5
-    for names, ws, y0, y1, outer in ((south, sw, 0.0, depth_s, 0), (north, nw, depth_s + hall, depth, 1)):
-        cx = x
-        for t, w in zip(names, ws):
-            if t == "foyer":
-                foyer = len(out)
-                t = "indoor"
-            rect = [cx, y0, cx + w, y1]
-            max_cut = min(1.2, y1 - y0 - 3.0)
-            if stepped and max_cut >= 0.4 and rng.random() < 0.4:
-                cut = float(rng.uniform(0.4, max_cut))
-                rect[1 + 2 * outer] += cut if outer == 0 else -cut
-            out.append((t, tuple(rect)))
-            cx += w
-    x_end = x + row_len
-    if prog["garage"]:
-        out.append(("garage", (x_end, 0.0, x_end + width("garage"), depth)))
-    # Mirror half of the houses so the garage / living room swap ends.
-    if rng.random() < 0.5:
-        total = max(r[2] for _, r in out)
-        out = [(t, (total - r[2], r[1], total - r[0], r[3])) for t, r in out]
-    out = [(t, tuple(round(v, 2) for v in r)) for t, r in out]
-    return out, {"depth": depth, "foyer": foyer}
 
 
 def _shared_edge(a, b, min_len):
@@ -284,10 +186,24 @@ def _door_on(axis, fixed, lo, hi, rng, width=rooms.DOOR_WIDTH, margin=0.25):
     return (fixed, c) if axis == "y" else (c, fixed)
 
 
-def _doors(rng, plan_rooms, hall_id, outdoor_id):
-    """Interior and exterior doors; guarantees every room is reachable."""
+def _doors(rng, plan_rooms, hallways, outdoor_id):
+    """Interior doors; guarantees every room is reachable from the main hallway.
+
+    Args:
+      rng: the house's generator.
+      plan_rooms: (kind, rect) per room, the yard (kind ``outdoor``) last if any.
+      hallways: ids of the hallways, the main one first.
+      outdoor_id: id of the yard, or -1.
+
+    Returns:
+      (doors, garage_inside): whether the garage (if any) has a door into the
+      house; a garage without one is reached through the yard.
+    """
     doors: list[Door] = []
     linked = set()
+    kinds = [k for k, _ in plan_rooms]
+    yard_only = "garage" in kinds and outdoor_id >= 0 and rng.random() < _GARAGE_YARD_ONLY_P
+    closed = {i for i, k in enumerate(kinds) if k == "outdoor" or (yard_only and k == "garage")}
 
     def add(a, b, center, axis, width=rooms.DOOR_WIDTH):
         doors.append(Door((a, b), center, width, axis))
@@ -296,27 +212,19 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
     n = len(plan_rooms)
     for a in range(n):
         for b in range(a + 1, n):
-            ta, ra = plan_rooms[a][0], plan_rooms[a][1]
-            tb, rb = plan_rooms[b][0], plan_rooms[b][1]
-            if "outdoor" in (ta, tb):
+            if a in closed or b in closed:
                 continue
-            edge = _shared_edge(ra, rb, _MIN_DOOR_WALL)
+            edge = _shared_edge(plan_rooms[a][1], plan_rooms[b][1], _MIN_DOOR_WALL)
             if edge is None:
                 continue
-            if hall_id in (a, b):
-                p = _HALL_DOOR_P[tb if a == hall_id else ta]
-            else:
-                p = door_probability(ta, tb)
-            if rng.random() < p:
+            if rng.random() < door_probability(kinds[a], kinds[b]):
                 c = _door_on(*edge, rng)
                 if c is not None:
                     add(a, b, c, edge[0])
     # Repair connectivity: join each unreachable room to its best neighbour.
     for _ in range(n):
-        reach = _reachable(n, linked, hall_id, skip=outdoor_id)
-        # A garage may be reached from the yard alone (its side door).
-        missing = [i for i in range(n) if i not in reach and i != outdoor_id
-                   and not (plan_rooms[i][0] == "garage" and outdoor_id >= 0)]
+        reach = _reachable(n, linked, hallways[0], skip=outdoor_id)
+        missing = [i for i in range(n) if i not in reach and i not in closed]
         if not missing:
             break
         best = None
@@ -325,10 +233,9 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
                 edge = _shared_edge(plan_rooms[i][1], plan_rooms[j][1], _MIN_DOOR_WALL)
                 if edge is None:
                     continue
-                # The hallway competes with its own door probability, so a room
+                # A hallway competes with its own door probability, so a room
                 # meant to be reached through a neighbour (a suite) stays so.
-                p = (_HALL_DOOR_P[plan_rooms[i][0]] if j == hall_id
-                     else door_probability(plan_rooms[i][0], plan_rooms[j][0]))
+                p = door_probability(kinds[i], kinds[j])
                 if p > 0 and (best is None or p > best[0]):
                     best = (p, i, j, edge)
         if best is None:
@@ -337,7 +244,7 @@ def _doors(rng, plan_rooms, hall_id, outdoor_id):
         add(i, j, _door_on(*edge, rng), edge[0])
     else:
         raise _Retry("could not connect every room")
-    return doors
+    return doors, "garage" in kinds and not yard_only
 
 
 def _reachable(n, linked, start, skip=None):
@@ -358,8 +265,12 @@ class _Retry(Exception):
     """A sampled layout cannot be completed; the generator draws another."""
 
 
-def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id, foyer=None):
+def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id, hallways, foyer, garage_inside):
     """Front door, optional back door and the garage's doors to the yard.
+
+    The garage always has its (closed) garage door; its side door is drawn
+    with ``_GARAGE_SIDE_DOOR_P`` when it has a door into the house and is
+    always there when it has not.
 
     Returns:
       (doors, garage_door_panels) where a panel is (axis, fixed, lo, hi).
@@ -384,8 +295,9 @@ def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id, foyer=None):
         return False
 
     types = [t for t, _ in plan_rooms]
-    # Front door: the hallway end if it reaches the outside, else a public room.
-    order = [0] + ([foyer] if foyer is not None else [])
+    # Front door: the main hallway's end if it reaches the outside, else the
+    # foyer, the other hallway, a public room.
+    order = [hallways[0]] + ([foyer] if foyer is not None else []) + list(hallways[1:])
     order += [i for i, t in enumerate(types) if t == "living_room"]
     order += [i for i, t in enumerate(types) if t in ("dining_room", "kitchen")]
     order += list(range(1, len(types)))
@@ -405,7 +317,8 @@ def _exterior_doors(rng, plan_rooms, house_rects, outdoor_id, foyer=None):
         mid = (lo + hi) / 2
         panel = (axis, fixed, round(mid - 1.3, 2), round(mid + 1.3, 2))
         panels.append(panel)
-        if not place(g, avoid=panel):
+        side_door = not garage_inside or rng.random() < _GARAGE_SIDE_DOOR_P
+        if side_door and not place(g, avoid=panel):
             raise _Retry("garage has no wall for a side door")
     return doors, panels
 
@@ -501,7 +414,11 @@ def generate(seed: int, house_id: str = "house") -> House:
             prog = sample_programme(rng)
         try:
             house = _generate_once(rng, seed, house_id, prog)
-            navgrid.NavGrid(house).check_reachable()
+            # Every room reachable with room to spare: passages through
+            # furnished rooms (the kitchen behind the living room) at least
+            # 2 x _PASSAGE_RADIUS wide, so the 9-action controller does not
+            # get stuck threading them.
+            navgrid.NavGrid(house, radius=_PASSAGE_RADIUS).check_reachable()
             return house
         except (_Retry, furnish.NoRoom, navgrid.Unreachable) as e:
             last = e
@@ -509,7 +426,8 @@ def generate(seed: int, house_id: str = "house") -> House:
 
 
 def _generate_once(rng, seed, house_id, prog) -> House:
-    layout, facts = _floor_plan(rng, prog)
+    plan = floorplan.floor_plan(rng, prog)
+    layout = list(plan.rooms)
     house_rects = [r for _, r in layout]
     hx0 = min(r[0] for r in house_rects)
     hy0 = min(r[1] for r in house_rects)
@@ -523,17 +441,17 @@ def _generate_once(rng, seed, house_id, prog) -> House:
     else:
         lot = (hx0, hy0, hx1, hy1)
     outdoor_id = len(layout) - 1 if has_yard else -1
-    doors = _doors(rng, layout, 0, outdoor_id)
+    doors, garage_inside = _doors(rng, layout, plan.hallways, outdoor_id)
     panels = []
     if has_yard:
-        ext_doors, panels = _exterior_doors(rng, layout, house_rects, outdoor_id, facts["foyer"])
+        ext_doors, panels = _exterior_doors(rng, layout, house_rects, outdoor_id, plan.hallways, plan.foyer,
+                                            garage_inside)
         doors += ext_doors
     counts: dict[str, int] = {}
     house_rooms = []
-    for i, (t, r) in enumerate(layout):
-        label = "hallway" if i == 0 else t
-        counts[label] = counts.get(label, 0) + 1
-        house_rooms.append(Room(i, t, f"{label}_{counts[label]}", r))
+    for i, (kind, r) in enumerate(layout):
+        counts[kind] = counts.get(kind, 0) + 1
+        house_rooms.append(Room(i, floorplan.room_type(kind), f"{kind}_{counts[kind]}", r))
     walls = _walls(house_rects, doors, panels, lot, has_yard)
     items = furnish.furnish(rng, house_rooms, doors, walls, lot)
     return House(

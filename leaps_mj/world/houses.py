@@ -122,6 +122,41 @@ class House:
             if self.rooms[a].type != self.rooms[b].type
         }
 
+    def plan_lengths(self, target: str) -> dict[int, int]:
+        """Fewest room-to-room hops (door to door) from each room to a room of type ``target``.
+
+        Returns:
+          room id → hops (0 in a ``target`` room); rooms that cannot reach one
+          are left out (and every room is, if the house has no such room).
+
+        Raises:
+          ValueError: if ``target`` is not a graph node (room type or ``indoor``).
+        """
+        if target not in rooms.GRAPH_NODES:
+            raise ValueError(f"unknown room type {target!r}; expected one of {list(rooms.GRAPH_NODES)}")
+        adj: dict[int, set[int]] = {r.id: set() for r in self.rooms}
+        for a, b in self.connectivity():
+            adj[a].add(b)
+            adj[b].add(a)
+        hops = {r.id: 0 for r in self.rooms if r.type == target}
+        frontier = list(hops)
+        while frontier:
+            nxt = []
+            for i in frontier:
+                for j in sorted(adj[i] - hops.keys()):
+                    hops[j] = hops[i] + 1
+                    nxt.append(j)
+            frontier = nxt
+        return hops
+
+    def diameter(self) -> int:
+        """The longest optimal plan in the house: the most hops from any room
+        to the nearest room of a target type it contains (0 if it has none)."""
+        longest = 0
+        for target in set(self.room_types) & set(rooms.ROOM_TYPES):
+            longest = max([longest, *self.plan_lengths(target).values()])
+        return longest
+
     def obstacles(self) -> list[tuple[float, float, float, float]]:
         """Floor rectangles the agent cannot enter: walls and furniture."""
         rects = [w.rect for w in self.walls]

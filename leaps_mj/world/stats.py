@@ -43,6 +43,10 @@ class HouseStats:
       adjacency: (type a, type b) → fraction of the houses containing both
         types in which a door joins them; NaN if no house contains both.
       cooccurrence: (type a, type b) → number of houses containing both.
+      rooms_distribution: number of indoor rooms → number of houses.
+      diameter_distribution: house diameter (the longest optimal plan in the
+        house, :meth:`leaps_mj.world.houses.House.diameter`) → number of
+        houses; it bounds the plan lengths a house can offer episodes.
     """
 
     n_houses: int
@@ -51,6 +55,8 @@ class HouseStats:
     typed_per_house: float
     adjacency: dict[tuple[str, str], float]
     cooccurrence: dict[tuple[str, str], int]
+    rooms_distribution: dict[int, int]
+    diameter_distribution: dict[int, int]
 
     def adjacency_matrix(self) -> np.ndarray:
         """The adjacency frequencies as a symmetric 9x9 matrix (diagonal 1)."""
@@ -76,7 +82,7 @@ def compute(house_list: Iterable[houses.House]) -> HouseStats:
     has = {t: 0 for t in rooms.GRAPH_NODES}
     both = {p: 0 for p in PAIRS}
     joined = {p: 0 for p in PAIRS}
-    n_rooms, n_types = [], []
+    n_rooms, n_types, diameters = [], [], []
     n = 0
     for h in house_list:
         n += 1
@@ -85,6 +91,7 @@ def compute(house_list: Iterable[houses.House]) -> HouseStats:
             has[t] += 1
         n_rooms.append(len(h.indoor_rooms))
         n_types.append(len(types - {rooms.INDOOR}))
+        diameters.append(h.diameter())
         for a, b in PAIRS:
             if a in types and b in types:
                 both[(a, b)] += 1
@@ -99,7 +106,14 @@ def compute(house_list: Iterable[houses.House]) -> HouseStats:
         typed_per_house=float(np.mean(n_types)),
         adjacency={p: (joined[p] / both[p] if both[p] else float("nan")) for p in PAIRS},
         cooccurrence=dict(both),
+        rooms_distribution=_histogram(n_rooms),
+        diameter_distribution=_histogram(diameters),
     )
+
+
+def _histogram(values: list[int]) -> dict[int, int]:
+    """value → count, sorted by value."""
+    return {int(v): int(c) for v, c in zip(*np.unique(values, return_counts=True))}
 
 
 def reference_adjacency() -> dict[tuple[str, str], float]:
@@ -180,6 +194,12 @@ def format_report(stats: HouseStats, top: int = 12, markdown: bool = False) -> s
     )
     lines.append(f"Mean |frequency - reference train|: {frequency_error(stats):.3f}")
     lines.append("")
+    for title, dist in (("Indoor rooms per house", stats.rooms_distribution),
+                        ("House diameter (longest optimal plan, room-to-room steps)", stats.diameter_distribution)):
+        lines.append(f"{title}: houses (fraction)")
+        lines.append("")
+        table([title.split(" (")[0].lower(), "houses", "fraction"],
+              [[str(k), str(v), f"{v / stats.n_houses:.2f}"] for k, v in dist.items()])
     lines.append("Adjacency frequency per type pair (fraction of houses with both types where a door")
     lines.append("joins them) vs the reference prior (random-exploration connectivity, SUNCG):")
     lines.append("")

@@ -1,0 +1,154 @@
+"""Tests for the hop benchmark: the hop episodes, the paired test and ``python -m leaps_mj.evaluation.hops``."""
+
+import csv
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from leaps_mj.environment import episodes
+from leaps_mj.evaluation import harness, hops
+from leaps_mj.learning import policies
+from leaps_mj.world import rooms
+
+
+@pytest.fixture(scope="module")
+def hop_dataset(tiny_dataset):
+    """The tiny dataset with hop episodes for its test split (3 starts per node and distance)."""
+    eps, counts = episodes.generate_hops(str(tiny_dataset), "test", per_node=3, seed=0)
+    episodes.write(episodes.episodes_path(str(tiny_dataset), "test", "hops"), eps)
+    return tiny_dataset, eps, counts
+
+
+def test_hop_episodes_are_deterministic(hop_dataset, tmp_path):
+    dataset, eps, _ = hop_dataset
+    again, _ = episodes.generate_hops(str(dataset), "test", per_node=3, seed=0)
+    episodes.write(tmp_path / "again.jsonl", again)
+    assert (tmp_path / "again.jsonl").read_bytes() == \
+        episodes.episodes_path(str(dataset), "test", "hops").read_bytes()
+    other, _ = episodes.generate_hops(str(dataset), "test", per_node=3, seed=1)
+    assert [e.start for e in other] != [e.start for e in eps]
+    assert episodes.load_split(str(dataset), "test", "hops") == eps
+
+
+def test_hop_starts_are_at_the_door_distance_and_outside_the_node(hop_dataset):
+    dataset, eps, counts = hop_dataset
+    models = {hm.house.id: hm for hm in episodes.house_models(str(dataset), "test")}
+    for e in eps:
+        hm = models[e.house]
+        room = hm.house.rooms[hm.room_at(e.start[:2])]
+        assert room.type != e.target and hm.plan_length(room.id, e.target) == e.plan_length
+        assert not hm.in_node(hm.semantic_bits(*e.start[:2]), rooms.room_index(e.target))
+        assert e.geodesic == pytest.approx(hm.geodesic(e.start[:2], e.target), abs=1e-3)
+    assert set(counts) == set(rooms.GRAPH_NODES)
+    for node, per_d in counts.items():
+        for d, c in per_d.items():
+            assert c["episodes"] == (3 if c["houses"] else 0)
+            assert c["episodes"] == sum(e.target == node and e.plan_length == d for e in eps)
+            having = sum(node in hm.house.room_types for hm in models.values())
+            assert c["houses"] <= having
+    assert {e.plan_length for e in eps} == set(episodes.HOP_DISTANCES)
+
+
+def test_bad_arguments_name_the_value(hop_dataset):
+    dataset, _, _ = hop_dataset
+    with pytest.raises(ValueError, match="per_node 0"):
+        episodes.generate_hops(str(dataset), "test", per_node=0)
+    with pytest.raises(ValueError, match=r"distances \(0, 1\)"):
+        episodes.generate_hops(str(dataset), "test", per_node=2, distances=(0, 1))
+    with pytest.raises(ValueError, match="unknown episode set 'loops'"):
+        episodes.load_split(str(dataset), "test", "loops")
+    with pytest.raises(ValueError, match="make_episodes.py --hops"):
+        episodes.load_split(str(dataset), "valid", "hops")
+    with pytest.raises(ValueError, match="episodes 'loops'"):
+        harness.EvalConfig(episodes="loops")
+    with pytest.raises(ValueError, match="policy_dir 'x' needs subpolicy 'learned'"):
+        harness.EvalConfig(policy_dir="x")
+
+
+def test_paired_test_is_the_exact_sign_test():
+    t = harness.paired_test(np.array([1, 1, 1, 1, 1, 1, 1, 0]), np.array([0, 0, 0, 0, 0, 0, 1, 1]))
+    assert (t["n"], t["a"], t["b"], t["a_only"], t["b_only"]) == (8, 7, 2, 6, 1)
+    assert t["p"] == pytest.approx(0.125)  # 2 * P(X <= 1), X ~ Binomial(7, 1/2)
+    assert harness.paired_test(np.ones(3), np.ones(3))["p"] == 1.0
+    with pytest.raises(ValueError, match="shapes"):
+        harness.paired_test(np.ones(3), np.ones(2))
+
+
+def test_new_config_fields_keep_old_result_folders_valid(tmp_path):
+    config = harness.EvalConfig()
+    assert set(config.to_json()) == {"dataset", "split", "horizon", "subpolicy", "prior", "replan_every", "seed"}
+    (tmp_path / "config.json").write_text(json.dumps(config.to_json()))
+    harness._check_config(tmp_path, config)  # a folder written before the fields existed
+    with pytest.raises(ValueError, match="other settings"):
+        harness._check_config(tmp_path, harness.EvalConfig(episodes="hops"))
+
+
+def _main(dataset, out, *extra):
+    return hops.main(["--dataset", str(dataset), "--split", "test", "--horizon", "10", "20", "--subset", "smoke",
+                      "--limit", "4", "--out", str(out), "--no-progress", *extra])
+
+
+def test_main_runs_resumes_and_pairs_with_a_baseline(hop_dataset, tmp_path, monkeypatch, capsys):
+    dataset, _, _ = hop_dataset
+    base = tmp_path / "base"
+    assert _main(dataset, base) == 0
+    for label in ("pure", "oracle"):
+        with open(base / f"episodes_{label}.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == 4 and all(int(r["steps"]) <= 20 for r in rows)
+    table = (base / "results.md").read_text()
+    assert "| pure |" in table and "1 door, ≤ 10" in table and "## 2 doors, per node" in table
+    assert (base / "hop_success.png").stat().st_size > 10_000
+    summary = json.loads((base / "summary.json").read_text())
+    assert summary["config"]["episodes"] == "hops"
+    by_distance = summary["success"]["oracle"]["20"]
+    assert sum(by_distance[d]["all"]["n"] for d in by_distance) == 4
+    capsys.readouterr()
+
+    def no_more_episodes(*args, **kwargs):
+        raise AssertionError("a finished episode was run again")
+
+    monkeypatch.setattr(episodes, "run_episode", no_more_episodes)
+    assert _main(dataset, base) == 0
+    assert (base / "results.md").read_text() == table
+    monkeypatch.undo()
+
+    # The shipped checkpoints as a "new" folder: the same seeds give the same episodes, p = 1.
+    new = tmp_path / "new"
+    assert _main(dataset, new, "--agent", "pure", "--policy-dir", str(policies.DEFAULT_DIR),
+                 "--baseline", str(base)) == 0
+    printed = capsys.readouterr().out
+    assert "exact McNemar p = 1" in printed and "only here 0, only baseline 0" in printed
+    paired = json.loads((new / "summary.json").read_text())["baseline"]["paired"]
+    assert all(per["all"]["a"] == per["all"]["b"] for by_d in paired.values() for per in by_d.values())
+    assert "## Paired with the baseline" in (new / "results.md").read_text()
+
+
+def test_main_refuses_what_it_cannot_compare(hop_dataset, tmp_path, capsys):
+    dataset, _, _ = hop_dataset
+    assert _main(dataset, tmp_path / "a", "--policy-dir", str(tmp_path / "nothing")) == 2
+    assert "holds no sub-policy checkpoint" in capsys.readouterr().err
+    assert _main(dataset, tmp_path / "b", "--agent", "random", "--seed", "1") == 0
+    capsys.readouterr()
+    assert _main(dataset, tmp_path / "c", "--agent", "random", "--baseline", str(tmp_path / "b")) == 2
+    assert "add it to --agent" in capsys.readouterr().err
+    assert _main(dataset, tmp_path / "d", "--agent", "pure", "--baseline", str(tmp_path / "b")) == 2
+    err = capsys.readouterr().err
+    assert "not comparable" in err and "'seed': (1, 0)" in err
+    assert not (tmp_path / "d").exists()  # refused before running anything
+
+
+def test_a_partial_checkpoint_folder_runs_on_its_nodes(hop_dataset, tmp_path, capsys):
+    dataset, _, _ = hop_dataset
+    folder = tmp_path / "kitchen_only"
+    folder.mkdir()
+    shutil.copy(policies.DEFAULT_DIR / "kitchen.pt", folder / "kitchen.pt")
+    assert _main(dataset, tmp_path / "all", "--agent", "pure", "--policy-dir", str(folder)) == 2
+    err = capsys.readouterr().err
+    assert "has no checkpoint for nodes [" in err and "--nodes kitchen" in err
+    assert _main(dataset, tmp_path / "kitchen", "--agent", "pure", "--policy-dir", str(folder),
+                 "--nodes", "kitchen") == 0
+    rows = harness.read_rows(harness.csv_path(tmp_path / "kitchen", "pure"))
+    assert rows and {r["target"] for r in rows} == {"kitchen"}

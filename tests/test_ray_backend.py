@@ -1,0 +1,132 @@
+"""Tests for the Ray evaluation backend: the same CSV bytes as the local one, and no job lost when a worker dies.
+
+The default tests share one local Ray instance (2 CPUs, no dashboard); the
+simulated two-node cluster is slow (``python -m pytest -m slow tests/test_ray_backend.py``).
+"""
+
+import functools
+import os
+import signal
+import sys
+import time
+
+import pytest
+
+ray = pytest.importorskip("ray")
+
+from ray import cloudpickle  # noqa: E402
+from ray.cluster_utils import Cluster  # noqa: E402
+
+from leaps_mj.evaluation import harness, ray_backend  # noqa: E402
+
+# This module's helpers run inside actors, which cannot import the test module: send them by value.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+AGENTS = [harness.AGENTS["random"], harness.AGENTS["pure"]]
+#: Seconds any single wait on Ray may take in these tests.
+TIMEOUT_S = 120
+
+
+@pytest.fixture(scope="module")
+def ray_local():
+    """One small local Ray instance for the module's tests."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def _local_csvs(config, indices, folder) -> dict[str, bytes]:
+    harness.run(config, AGENTS, indices, folder, chunk=1, progress=False)
+    return {s.label: harness.csv_path(folder, s.label).read_bytes() for s in AGENTS}
+
+
+def test_ray_csvs_are_byte_identical_to_the_local_backends(ray_local, tiny_dataset, tmp_path):
+    config = harness.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
+    local = _local_csvs(config, [0, 1, 2, 3], tmp_path / "local")
+    table = harness.run(config, AGENTS, [0, 1, 2, 3], tmp_path / "ray", workers=2, chunk=1, progress=False,
+                        backend="ray")
+    assert {s.label: harness.csv_path(tmp_path / "ray", s.label).read_bytes() for s in AGENTS} == local
+    assert (tmp_path / "ray" / "config.json").read_bytes() == (tmp_path / "local" / "config.json").read_bytes()
+    assert [r["episode"] for r in table["pure"]] == [0, 1, 2, 3]
+
+
+def _nothing():
+    """An initializer without state."""
+
+
+def _slow_identity(job):
+    time.sleep(1.0)
+    return job
+
+
+def test_a_job_of_an_actor_killed_with_ray_kill_runs_again_once(ray_local):
+    with ray_backend.ActorPool(_nothing, (), workers=2, timeout_s=TIMEOUT_S) as pool:
+        results = pool.imap_unordered(_slow_identity, range(5))
+        done = [next(results)]
+        victim = pool.actors[0]  # every actor has a job running while a result is handed out
+        ray.kill(victim)
+        done += list(results)
+        assert victim not in pool.actors and len(pool.actors) == 2
+    assert sorted(done) == [0, 1, 2, 3, 4]
+
+
+def _die_once_mid_chunk(marker: str, job):
+    """Runs the chunk's first episode, then kills this worker's process the first time any worker gets here."""
+    spec, indices = job
+    harness._run_chunk((spec, indices[:1]))
+    try:
+        os.close(os.open(marker, os.O_CREAT | os.O_EXCL))
+    except FileExistsError:
+        return harness._run_chunk(job)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_episodes_of_a_killed_worker_process_are_rerun_and_counted_once(ray_local, tiny_dataset, tmp_path):
+    config = harness.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
+    local = _local_csvs(config, [0, 1, 2, 3, 4], tmp_path / "local")
+    out = tmp_path / "ray"
+    out.mkdir()
+    jobs = [(spec, [0, 1, 2, 3, 4][k:k + 2]) for spec in AGENTS for k in (0, 2, 4)]
+    marker = str(tmp_path / "died")
+    with ray_backend.ActorPool(harness._init_worker, (config, None, None, 1), workers=2,
+                               timeout_s=TIMEOUT_S) as pool:
+        for spec, rows in pool.imap_unordered(functools.partial(_die_once_mid_chunk, marker), jobs):
+            harness.append_rows(harness.csv_path(out, spec.label), rows)
+    assert os.path.exists(marker)  # a worker did die
+    assert {s.label: harness.csv_path(out, s.label).read_bytes() for s in AGENTS} == local
+
+
+def _fail_to_start():
+    raise ValueError("no such dataset")
+
+
+def test_a_worker_that_cannot_start_is_an_error_not_a_retry(ray_local):
+    with ray_backend.ActorPool(_fail_to_start, (), workers=1, timeout_s=TIMEOUT_S) as pool:
+        with pytest.raises(RuntimeError, match="failed to start"):
+            list(pool.imap_unordered(_slow_identity, [0]))
+
+
+def test_ray_address_while_ray_is_running_is_refused(ray_local):
+    with pytest.raises(ValueError, match="already initialised"):
+        with ray_backend.connected("10.0.0.1:6379"):
+            pass
+
+
+@pytest.mark.slow
+def test_two_node_cluster_gives_the_local_bytes(tiny_dataset, tmp_path):
+    config = harness.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
+    local = _local_csvs(config, [0, 1, 2], tmp_path / "local")
+    if ray.is_initialized():  # the module's local instance, when it ran first in this process
+        ray.shutdown()
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        cluster.add_node(num_cpus=1)
+        ray.init(address=cluster.address, log_to_driver=False)
+        cluster.wait_for_nodes(timeout=TIMEOUT_S)
+        assert len([n for n in ray.nodes() if n["Alive"]]) == 2
+        harness.run(config, AGENTS, [0, 1, 2], tmp_path / "ray", workers=None, chunk=1, progress=False,
+                    backend="ray")  # one actor per cluster CPU: one on each node
+        assert {s.label: harness.csv_path(tmp_path / "ray", s.label).read_bytes() for s in AGENTS} == local
+    finally:
+        ray.shutdown()
+        cluster.shutdown()
