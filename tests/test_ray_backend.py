@@ -14,10 +14,10 @@ import pytest
 
 ray = pytest.importorskip("ray")
 
-from ray import cloudpickle  # noqa: E402
-from ray.cluster_utils import Cluster  # noqa: E402
+from ray import cloudpickle
+from ray.cluster_utils import Cluster
 
-from leaps_mj.evaluation import harness, ray_backend  # noqa: E402
+from leaps_mj.evaluation import harness, ray_backend
 
 # This module's helpers run inside actors, which cannot import the test module: send them by value.
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -101,15 +101,14 @@ def _fail_to_start():
 
 
 def test_a_worker_that_cannot_start_is_an_error_not_a_retry(ray_local):
-    with ray_backend.ActorPool(_fail_to_start, (), workers=1, timeout_s=TIMEOUT_S) as pool:
-        with pytest.raises(RuntimeError, match="failed to start"):
-            list(pool.imap_unordered(_slow_identity, [0]))
+    with ray_backend.ActorPool(_fail_to_start, (), workers=1, timeout_s=TIMEOUT_S) as pool, \
+            pytest.raises(RuntimeError, match="failed to start"):
+        list(pool.imap_unordered(_slow_identity, [0]))
 
 
 def test_ray_address_while_ray_is_running_is_refused(ray_local):
-    with pytest.raises(ValueError, match="already initialised"):
-        with ray_backend.connected("10.0.0.1:6379"):
-            pass
+    with pytest.raises(ValueError, match="already initialised"), ray_backend.connected("10.0.0.1:6379"):
+        pass
 
 
 @pytest.mark.slow
@@ -130,3 +129,11 @@ def test_two_node_cluster_gives_the_local_bytes(tiny_dataset, tmp_path):
     finally:
         ray.shutdown()
         cluster.shutdown()
+
+
+def test_workers_get_the_drivers_gl_settings_but_not_a_disabled_backend(monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")
+    monkeypatch.setenv("MUJOCO_EGL_DEVICE_ID", "1")
+    assert {"MUJOCO_GL": "osmesa", "MUJOCO_EGL_DEVICE_ID": "1"}.items() <= ray_backend.worker_env().items()
+    monkeypatch.setenv("MUJOCO_GL", "disabled")
+    assert "MUJOCO_GL" not in ray_backend.worker_env()

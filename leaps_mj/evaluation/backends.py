@@ -51,8 +51,9 @@ class Backend:
             raise ValueError(f"ray address {self.address!r} needs backend 'ray', not {self.name!r}")
 
     def in_process(self, n_jobs: int) -> bool:
-        """Whether ``n_jobs`` jobs run in this process: one local worker, or at most one job locally."""
-        return self.name == "local" and ((self.workers or 1) == 1 or n_jobs <= 1)
+        """Whether ``n_jobs`` jobs run in this process: none at all (no worker is started, no Ray
+        connected), one local worker, or a single job locally."""
+        return n_jobs == 0 or self.name == "local" and ((self.workers or 1) == 1 or n_jobs == 1)
 
 
 @contextlib.contextmanager
@@ -63,7 +64,7 @@ def worker_pool(backend: Backend, initializer, initargs: tuple, n_jobs: int):
       backend: a backend whose jobs do not run in this process.
       initializer: module-level function (workers import it by name).
       initargs: its arguments (pickled to every worker).
-      n_jobs: how many jobs there are (no more local processes are started).
+      n_jobs: how many jobs there are (no more workers are started).
 
     Yields:
       an object with ``imap_unordered(fn, jobs)``.
@@ -71,8 +72,8 @@ def worker_pool(backend: Backend, initializer, initargs: tuple, n_jobs: int):
     if backend.name == "ray":
         from leaps_mj.evaluation import ray_backend
 
-        with ray_backend.connected(backend.address), \
-                ray_backend.ActorPool(initializer, initargs, backend.workers) as pool:
+        with ray_backend.connected(backend.address), ray_backend.ActorPool(
+                initializer, initargs, min(backend.workers or ray_backend.cluster_cpus(), n_jobs)) as pool:
             yield pool
         return
     pool = multiprocessing.get_context("spawn").Pool(min(backend.workers or 1, n_jobs), initializer, initargs)

@@ -331,8 +331,10 @@ def _check_config(out: pathlib.Path, config: EvalConfig) -> None:
 
 
 @contextlib.contextmanager
-def _results(where: backends.Backend, jobs: list, config: EvalConfig, model, record):
-    """``(spec, rows)`` of every job as it finishes: in this process, or on ``where``'s workers."""
+def chunk_results(where: backends.Backend, jobs: list, config: EvalConfig, model=None, record=None):
+    """``(spec, rows)`` of every job ``(spec, episode indices)`` as it finishes, in this process or on
+    ``where``'s workers: the part of :func:`run` that depends on the backend (also timed by
+    ``benchmarks/ray_overhead.py``)."""
     if not where.in_process(len(jobs)):
         with backends.worker_pool(where, _init_worker, (config, model, record, 1), len(jobs)) as pool:
             yield pool.imap_unordered(_run_chunk, jobs)
@@ -390,7 +392,7 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
         done = {r["episode"] for r in read_rows(csv_path(out, spec.label))}
         todo = [i for i in indices if i not in done]
         jobs += [(spec, todo[k:k + chunk]) for k in range(0, len(todo), chunk)]
-    with _results(where, jobs, config, model, record) as results, \
+    with chunk_results(where, jobs, config, model, record) as results, \
             tqdm.tqdm(total=sum(len(j[1]) for j in jobs), desc="evaluate: episodes", disable=not progress) as bar:
         for spec, rows in results:
             append_rows(csv_path(out, spec.label), rows)

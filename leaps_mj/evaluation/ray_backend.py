@@ -12,9 +12,10 @@ job's result is taken only from the run that returned, so none is lost and
 none counted twice. An error raised by a job itself, or by the initializer,
 is not retried: it is a bug or bad input, and is raised in the driver.
 
-Workers get MuJoCo's GL settings through the actor's ``runtime_env``
-(:data:`FORWARDED_ENV`), so they apply before MuJoCo is imported there; the
-driver opens no GL context. See docs/ray.md for running on a cluster.
+Workers get the driver's MuJoCo GL settings through the actor's
+``runtime_env`` (:func:`worker_env`), so they apply before MuJoCo is imported
+there; the driver opens no GL context. See docs/ray.md for running on a
+cluster.
 """
 
 from __future__ import annotations
@@ -27,6 +28,19 @@ import ray
 
 #: Environment variables passed from the driver to every actor when set: MuJoCo reads the GL ones at import.
 FORWARDED_ENV = ("MUJOCO_GL", "MUJOCO_EGL_DEVICE_ID", "PYOPENGL_PLATFORM", "LP_NUM_THREADS")
+
+
+def worker_env() -> dict[str, str]:
+    """The ``runtime_env`` variables of every actor: the driver's :data:`FORWARDED_ENV`.
+
+    A ``MUJOCO_GL`` of "disabled" (the driver found no GL backend) is not
+    passed on: it says nothing of the worker nodes, which then pick their
+    own (:mod:`leaps_mj.environment.gl_backend`).
+    """
+    env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
+    if env.get("MUJOCO_GL") == "disabled":
+        del env["MUJOCO_GL"]
+    return env
 #: Seconds to wait for any running job to finish before giving up (a hung worker or a cluster without room).
 JOB_TIMEOUT_S = 3600.0
 
@@ -59,6 +73,11 @@ def connected(address: str | None = None):
         ray.shutdown()
 
 
+def cluster_cpus() -> int:
+    """CPUs of the connected cluster (at least 1): the default number of actors, one per CPU."""
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
 class _Worker:
     """One actor: state built once by ``initializer(*initargs)``, then one job at a time."""
 
@@ -76,7 +95,7 @@ class ActorPool:
     Args:
       initializer: module-level function building a worker's state (in the actor's process).
       initargs: its arguments.
-      workers: actors; None: one per CPU of the cluster.
+      workers: actors (see :func:`cluster_cpus`).
       max_retries: how many times one job may lose its actor before the pool gives up.
       timeout_s: seconds to wait for some running job to finish (see :data:`JOB_TIMEOUT_S`).
 
@@ -84,15 +103,12 @@ class ActorPool:
       ValueError: if ``workers`` or ``max_retries`` is out of range.
     """
 
-    def __init__(self, initializer, initargs: tuple, workers: int | None = None, max_retries: int = 3,
+    def __init__(self, initializer, initargs: tuple, workers: int, max_retries: int = 3,
                  timeout_s: float = JOB_TIMEOUT_S):
-        if workers is None:
-            workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         if workers < 1 or max_retries < 0:
             raise ValueError(f"workers {workers!r} and max_retries {max_retries!r}: expected >= 1 and >= 0")
-        env_vars = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
         self._remote = ray.remote(_Worker).options(num_cpus=1, max_restarts=0,
-                                                    runtime_env={"env_vars": env_vars})
+                                                    runtime_env={"env_vars": worker_env()})
         self._init = (initializer, initargs)
         self._max_retries = max_retries
         self._timeout_s = timeout_s
@@ -157,7 +173,7 @@ class ActorPool:
             ray.kill(actor)
         self._actors = []
 
-    def __enter__(self) -> ActorPool:
+    def __enter__(self):
         return self
 
     def __exit__(self, *exc) -> None:
