@@ -1,7 +1,7 @@
 """PPO from Stable-Baselines3 on RoomNav, through the registered gymnasium id as it is.
 
     pip install -e ".[all]"      # stable-baselines3 is in the `sb3` extra
-    python examples/sb3_ppo.py --steps 50000 --num-envs 2 --out runs/sb3_ppo
+    python examples/sb3_ppo.py --steps 20000 --num-envs 2 --out runs/sb3_ppo
 
 Trains ``MultiInputPolicy`` (a NatureCNN per image entry, segmentation and
 depth, plus the bits) on the training houses at 64x48, with the shaped
@@ -75,7 +75,7 @@ def plot_curve(rows: list[dict], path: pathlib.Path, window: int = 50) -> None:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--steps", type=int, default=50_000, help="environment steps of training")
+    p.add_argument("--steps", type=int, default=20_000, help="environment steps of training")
     p.add_argument("--num-envs", type=int, default=2, help="environments (worker processes when > 1)")
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/sb3_ppo"))
     p.add_argument("--dataset", default=None, help="dataset name or folder (default: the canonical one)")

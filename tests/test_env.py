@@ -60,6 +60,18 @@ def test_start_is_outside_the_target_room(env):
         assert env.episode.geodesic > 0 and env.episode.plan_length >= 1
 
 
+def test_starts_can_be_bounded_in_doors_from_the_target(tiny_dataset):
+    e = leaps_mj.load(str(tiny_dataset), "train", seed=4, width=16, height=12, max_start_doors=1)
+    try:
+        specs = [e.sample_episode() for _ in range(40)]
+        assert {s.plan_length for s in specs} == {1}
+    finally:
+        e.close()
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="max_start_doors"):
+            envlib.EnvConfig(max_start_doors=bad)
+
+
 def test_same_seed_same_trajectory(tiny_dataset):
     runs = []
     for _ in range(2):

@@ -68,6 +68,9 @@ class EnvConfig:
       max_start_distance: if set, sampled starts are at most this many
         geodesic metres from the target (curriculum / short training episodes).
       min_start_distance: sampled starts are at least this far (metres).
+      max_start_doors: if set, sampled starts lie in rooms at most this many
+        doors (room-to-room hops) from a room of the target type: the
+        neighbouring-room task LEAPS hands its sub-policies.
       cache_size: compiled houses kept (physics + renderer).
       pixels: render segmentation and depth. False gives a "blind" fast
         environment (images all zero, the see test cannot pass except for
@@ -85,6 +88,7 @@ class EnvConfig:
     targets: tuple[str, ...] = rooms.ROOM_TYPES
     max_start_distance: float | None = None
     min_start_distance: float = 0.0
+    max_start_doors: int | None = None
     cache_size: int = 32
     pixels: bool = True
 
@@ -107,6 +111,9 @@ class EnvConfig:
                 raise ValueError(f"unknown target room type {t!r}; expected one of {list(rooms.GRAPH_NODES)}")
         if not self.targets:
             raise ValueError("targets is empty: expected at least one room type")
+        if self.max_start_doors is not None and (isinstance(self.max_start_doors, bool) or not isinstance(
+                self.max_start_doors, int) or self.max_start_doors < 1):
+            raise ValueError(f"max_start_doors {self.max_start_doors!r}: expected a positive integer or None")
         if self.max_start_distance is not None and self.max_start_distance <= self.min_start_distance:
             raise ValueError(
                 f"max_start_distance {self.max_start_distance!r} must exceed min_start_distance "
@@ -198,6 +205,16 @@ class HouseModel:
         self._has_yard = any(r.type == "outdoor" for r in house.rooms)
         self._distance_maps: dict[str, np.ndarray] = {}
         self._plan_lengths: dict[str, dict[int, int]] = {}
+        self._door_masks: dict[tuple[str, int], np.ndarray] = {}
+
+    def within_doors(self, target: str, doors: int) -> np.ndarray:
+        """Grid mask of the rooms at most ``doors`` room-to-room hops from a room of type ``target``."""
+        key = (target, doors)
+        if key not in self._door_masks:
+            lengths = {r.id: self.plan_length(r.id, target) for r in self.house.rooms}
+            near = [i for i, n in lengths.items() if n is not None and n <= doors]
+            self._door_masks[key] = np.isin(self.grid.room_id, near)
+        return self._door_masks[key]
 
     def semantic_bits(self, x: float, y: float) -> np.ndarray:
         """Room-type bits of a point: one per type of the rooms it is in.
@@ -578,6 +595,8 @@ class RoomNavEnvironment(control.Environment):
             ok &= dist < _NO_DISTANCE
             if c.max_start_distance is not None:
                 ok &= dist <= c.max_start_distance
+            if c.max_start_doors is not None:
+                ok &= hm.within_doors(target, c.max_start_doors)
             cells = np.flatnonzero(ok.ravel())
             if cells.size == 0:
                 continue

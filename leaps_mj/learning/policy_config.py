@@ -57,6 +57,9 @@ class TrainConfig:
       distance_step: Metres added to the bound every ``curriculum_iterations``.
       curriculum_iterations: Iterations per curriculum stage.
       max_distance: Largest bound the curriculum reaches (metres).
+      max_start_doors: If above 0, starts lie at most this many doors from a
+        room of the target (the neighbouring-room hops LEAPS asks of its
+        sub-policies); 0 bounds starts by distance only.
       checkpoint_every: Iterations between checkpoints.
       eval_episodes: Episodes of the final evaluation, per split.
       eval_horizon: Steps of an evaluation episode.
@@ -96,6 +99,7 @@ class TrainConfig:
     distance_step: float = 3.0
     curriculum_iterations: int = 10_000
     max_distance: float = 30.0
+    max_start_doors: int = 0
     checkpoint_every: int = 100
     eval_episodes: int = 20
     eval_horizon: int = 100
@@ -110,7 +114,7 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} {value!r}: expected a positive integer")
-        for name in ("num_houses", "replay", "seed"):
+        for name in ("num_houses", "replay", "seed", "max_start_doors"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")

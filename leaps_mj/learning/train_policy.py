@@ -192,7 +192,8 @@ class Trainer(trainer_lib.Trainer):
         c = self.config
         shards = training_houses(c.dataset, self.target, c.num_houses, c.num_envs, self.run_dir)
         return [dict(houses_dir=str(shard), width=c.width, height=c.height, horizon=c.horizon, reward="shaped",
-                     targets=(self.target,), max_start_distance=c.start_distance_at(self.iteration))
+                     targets=(self.target,), max_start_distance=c.start_distance_at(self.iteration),
+                     max_start_doors=c.max_start_doors or None)
                 for shard in shards]
 
     @contextlib.contextmanager
