@@ -70,11 +70,11 @@ from leaps_mj.world import dataset as dataset_lib
 
 @dataclasses.dataclass(frozen=True)
 class AgentSpec:
-    """An evaluated agent: a :func:`leaps_mj.planning.registry.make_agent` name and its options.
+    """An evaluated agent: a :func:`leaps_mj.evaluation.registry.make_agent` name and its options.
 
     Attributes:
       label: name in files, tables and plots.
-      name: agent name for :func:`leaps_mj.planning.registry.make_agent`.
+      name: agent name for :func:`leaps_mj.evaluation.registry.make_agent`.
       rule: LEAPS observation rule ("paper" or "release").
       psi_obs: LEAPS observation noise (psi_obs0, psi_obs1) overriding the
         prior file's, or None.

@@ -26,6 +26,8 @@ import os
 
 import ray
 
+from leaps_mj.environment import gl_backend
+
 #: Environment variables passed from the driver to every actor when set: MuJoCo reads the GL ones at import.
 FORWARDED_ENV = ("MUJOCO_GL", "MUJOCO_EGL_DEVICE_ID", "PYOPENGL_PLATFORM", "LP_NUM_THREADS")
 
@@ -33,12 +35,12 @@ FORWARDED_ENV = ("MUJOCO_GL", "MUJOCO_EGL_DEVICE_ID", "PYOPENGL_PLATFORM", "LP_N
 def worker_env() -> dict[str, str]:
     """The ``runtime_env`` variables of every actor: the driver's :data:`FORWARDED_ENV`.
 
-    A ``MUJOCO_GL`` of "disabled" (the driver found no GL backend) is not
+    A ``MUJOCO_GL`` of :data:`leaps_mj.environment.gl_backend.DISABLED` (the driver found no GL backend) is not
     passed on: it says nothing of the worker nodes, which then pick their
     own (:mod:`leaps_mj.environment.gl_backend`).
     """
     env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
-    if env.get("MUJOCO_GL") == "disabled":
+    if env.get("MUJOCO_GL") == gl_backend.DISABLED:
         del env["MUJOCO_GL"]
     return env
 #: Seconds to wait for any running job to finish before giving up (a hung worker or a cluster without room).
