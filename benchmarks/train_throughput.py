@@ -1,6 +1,6 @@
 """Sub-policy training throughput, end to end, and where the time goes.
 
-``python benchmarks/train_throughput.py [--presets cpu paper] [--iterations 4] [--num-envs 8] [--device cpu]``
+``python benchmarks/train_throughput.py [--presets cpu hop paper] [--iterations 4] [--num-envs N] [--device cpu]``
 
 Runs a few iterations of :class:`leaps_mj.learning.train_policy.Trainer` per preset
 (in a temporary folder; the first ``--warmup`` iterations, which compile the
@@ -16,9 +16,12 @@ second of wall-clock, and per 1000 samples the seconds spent
 
 All of it is measured in the same run, from the trainer's own timers (the
 ``*_seconds`` columns of ``progress.csv``). Each preset runs its own method:
-cpu is DAgger (3 replayed updates per iteration), paper is A2C (no expert).
-The paper preset's 64 environments are replaced by ``--num-envs`` so that it
-fits this machine's memory; its network and resolution are the paper's.
+cpu is DAgger (3 replayed updates per iteration), hop is DAgger with one
+network shared by the 9 nodes and auxiliary losses (2 replayed updates),
+paper is A2C (no expert). Each preset runs its own number of environments
+except the paper preset, whose 64 are replaced by 8 (or ``--num-envs`` for
+every preset) so that it fits this machine's memory; its network and
+resolution are the paper's.
 """
 
 from __future__ import annotations
@@ -44,17 +47,20 @@ _COLUMNS = (
 )
 
 
-def measure(preset: str, iterations: int, warmup: int, num_envs: int, device: str, dataset: str,
+def measure(preset: str, iterations: int, warmup: int, num_envs: int | None, device: str, dataset: str,
             target: str) -> dict:
     """Trains ``warmup + iterations`` iterations of a preset; returns the measured means."""
     base = train_policy.PRESETS[preset]
+    num_envs = num_envs or (8 if preset == "paper" else base.num_envs)
     config = dataclasses.replace(base, dataset=dataset, num_envs=num_envs,
+                                 learner_envs=min(base.learner_envs, num_envs),
                                  total_steps=(warmup + iterations) * num_envs * base.t_max,
                                  checkpoint_every=warmup + iterations)
+    name = train_policy.SHARED if config.shared else target
     with tempfile.TemporaryDirectory(prefix="train_throughput_") as out:
-        trainer = train_policy.Trainer(config, target, out, device=device, progress=False)
+        trainer = train_policy.Trainer(config, name, out, device=device, progress=False)
         trainer.train()
-        log = policy_eval.read_progress(f"{out}/{target}/progress.csv")
+        log = policy_eval.read_progress(f"{out}/{name}/progress.csv")
     rows = slice(warmup, None)
     per_k = 1000 / config.batch
     return {
@@ -67,16 +73,17 @@ def measure(preset: str, iterations: int, warmup: int, num_envs: int, device: st
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--presets", nargs="+", default=["cpu", "paper"], choices=sorted(train_policy.PRESETS))
+    parser.add_argument("--presets", nargs="+", default=["cpu", "hop", "paper"], choices=sorted(train_policy.PRESETS))
     parser.add_argument("--iterations", type=int, default=4, help="measured iterations per preset")
     parser.add_argument("--warmup", type=int, default=2, help="iterations not counted (house compilation)")
-    parser.add_argument("--num-envs", type=int, default=8, help="environment worker processes")
+    parser.add_argument("--num-envs", type=int, default=None,
+                        help="environments of every preset (default: the preset's own; 8 for paper)")
     parser.add_argument("--device", default="cpu", help="torch device of the learner")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of the learner")
     parser.add_argument("--dataset", default=dataset.CANONICAL)
-    parser.add_argument("--target", default="kitchen")
+    parser.add_argument("--target", default="kitchen", help="target of the per-target presets")
     args = parser.parse_args(argv)
-    if args.iterations < 1 or args.warmup < 0 or args.num_envs < 1 or args.threads < 1:
+    if args.iterations < 1 or args.warmup < 0 or (args.num_envs is not None and args.num_envs < 1) or args.threads < 1:
         raise ValueError(f"--iterations {args.iterations}, --warmup {args.warmup}, --num-envs {args.num_envs}, "
                          f"--threads {args.threads}: expected iterations, envs, threads >= 1 and warmup >= 0")
     import torch

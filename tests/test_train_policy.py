@@ -164,10 +164,11 @@ def test_mu_s_training_stores_and_feeds_the_bits(tiny_dataset, tmp_path):
     assert trainer.finished and len(unrolls) == config.iterations
     T, B, K = config.t_max, config.num_envs, rooms.NUM_ROOM_TYPES
     for unroll in unrolls:
-        assert unroll.semantic.shape == unroll.target.shape == (T, B, K)
-        np.testing.assert_array_equal(unroll.target[..., rooms.room_index("kitchen")], 1)
-        assert unroll.target.sum() == T * B
-    assert any(u.semantic.any() for u in unrolls), "agents in typed rooms see bits"
+        assert unroll.obs["semantic"].shape == unroll.obs["target"].shape == (T, B, K)
+        np.testing.assert_array_equal(unroll.obs["target"][..., rooms.room_index("kitchen")], 1)
+        assert unroll.obs["target"].sum() == T * B
+        assert not unroll.aux, "no auxiliary labels without aux_coef"
+    assert any(u.obs["semantic"].any() for u in unrolls), "agents in typed rooms see bits"
     log = policy_eval.read_progress(tmp_path / "kitchen" / "progress.csv")
     assert np.isfinite(log["bc_cross_entropy"][:2]).all() and np.isfinite(log["policy_loss"][2:]).all()
     policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",), use_semantic=True)
@@ -192,3 +193,71 @@ def test_the_train_command_reports_bad_values_in_one_line(capsys):
     assert train.main(["policy", "--target", "attic", "--out", "/nonexistent"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: target 'attic'") and "Traceback" not in err
+
+
+def test_shared_run_with_aux_trains_one_network_that_serves_every_node(tiny_dataset, tmp_path):
+    """A tiny shared run with auxiliary losses: unrolls carry the node one-hot and consistent labels,
+    the losses are finite, and shared.pt serves each graph node through LearnedSubPolicy."""
+    from leaps_mj.evaluation import harness
+    from leaps_mj.learning import policies
+    from leaps_mj.world import rooms
+
+    config = tiny(tiny_dataset, total_steps=4 * 16, method="dagger", shared=True, aux_coef=0.5, max_start_doors=2)
+    with pytest.raises(ValueError, match="shared"):
+        train_policy.Trainer(config, "kitchen", tmp_path, progress=False)
+    trainer = train_policy.Trainer(config, train_policy.SHARED, tmp_path, progress=False)
+    unrolls = []
+    update = trainer._update
+    trainer._update = lambda unroll, batch, rng: (unrolls.append(unroll), update(unroll, batch, rng))[1]
+    trainer.train()
+    T, B, N, K = config.t_max, config.num_envs, len(rooms.GRAPH_NODES), rooms.NUM_ROOM_TYPES
+    targets = set()
+    for unroll in unrolls:
+        assert unroll.obs["node"].shape == (T, B, N) and (unroll.obs["node"].sum(-1) == 1).all()
+        assert unroll.aux["room_view"].shape == (T, B, N, nets.VIEW_COLUMNS)
+        assert unroll.aux["semantic"].shape == (T, B, K) and unroll.aux["target_distance"].shape == (T, B)
+        assert (unroll.aux["target_distance"] >= 0).all()
+        # Standing in a typed room, the agent sees some of that room's floor, ceiling or furniture.
+        assert unroll.aux["room_view"].any()
+        targets |= set(unroll.obs["node"].argmax(-1).ravel().tolist())
+    assert len(targets) > 1, "episodes draw their target among the nodes"
+    log = policy_eval.read_progress(tmp_path / "shared" / "progress.csv")
+    assert np.isfinite(log["aux_loss"]).all() and np.isfinite(log["bc_cross_entropy"]).all()
+    train_policy.run_target(config, train_policy.SHARED, tmp_path, progress=False)
+    assert not (tmp_path / "kitchen.pt").exists()
+    assert policies.folder_targets(tmp_path) == rooms.GRAPH_NODES
+    policy = harness.learned_subpolicy(str(tmp_path))
+    assert policy.nets["kitchen"] is policy.nets["indoor"] and policy.nets["kitchen"].config.target_input
+
+
+def test_room_view_label_marks_the_strips_showing_each_node():
+    from leaps_mj.learning import training_env
+    from leaps_mj.world import rooms
+
+    none = len(rooms.GRAPH_NODES)
+    nodes = np.full((10, 20), none, np.uint8)
+    nodes[:, :4] = rooms.room_index("kitchen")  # the leftmost strip (20 px / 5 strips = 4 px each)
+    nodes[0, 19] = rooms.room_index("garage")   # one pixel of 40 in the last strip: 2.5 % >= 2 %
+    view = training_env.room_view(nodes)
+    assert view.shape == (none, nets.VIEW_COLUMNS)
+    assert view[rooms.room_index("kitchen")].tolist() == [1, 0, 0, 0, 0]
+    assert view[rooms.room_index("garage")].tolist() == [0, 0, 0, 0, 1]
+    assert view.sum() == 2
+
+
+def test_aux_loss_is_zero_mean_free_and_masks_invalid_steps():
+    from leaps_mj.world import rooms
+
+    T, B, N, K = 3, 2, len(rooms.GRAPH_NODES), rooms.NUM_ROOM_TYPES
+    labels = {"room_view": torch.randint(0, 2, (T, B, N, nets.VIEW_COLUMNS)),
+              "semantic": torch.randint(0, 2, (T, B, K)), "target_distance": torch.full((T, B), 2.5)}
+    perfect = {"view": (labels["room_view"].float() * 2 - 1) * 50, "here": (labels["semantic"].float() * 2 - 1) * 50,
+               "distance": torch.full((T, B), 2.5 / nets.AUX_DISTANCE_SCALE)}
+    valid = torch.ones(T, B)
+    loss, scalars = losses.aux_loss(perfect, labels, valid)
+    assert loss.item() < 1e-6 and scalars["aux_view_accuracy"] == 1.0 and scalars["aux_distance_error"] < 1e-6
+    wrong = dict(perfect, distance=perfect["distance"] + 1.0)
+    valid[1:] = 0.0
+    wrong["distance"][1:] = 1e3  # masked steps do not count
+    loss, scalars = losses.aux_loss(wrong, labels, valid)
+    assert loss.item() == pytest.approx(0.5) and scalars["aux_distance_error"] == pytest.approx(nets.AUX_DISTANCE_SCALE)

@@ -177,6 +177,9 @@ class HouseModel:
       grid: its :class:`navgrid.NavGrid`.
       seg_lut: geom id + 1 → segmentation class (index 0: nothing hit).
       see_lut: (K, ngeom + 1) bool, geom counts for the "see" test of type k.
+      node_lut: geom id + 1 → graph node of the room the geom belongs to
+        (floors, ceilings, furniture; ``len(GRAPH_NODES)`` for walls, doors
+        and nothing hit): the per-pixel room labels of training's auxiliary losses.
     """
 
     def __init__(self, house: houses.House, xml: str, model: mujoco.MjModel):
@@ -187,12 +190,15 @@ class HouseModel:
         self.seg_lut = np.zeros(ngeom + 1, dtype=np.uint8)
         # One row per graph node; the indoor row stays empty (nothing to see).
         self.see_lut = np.zeros((len(rooms.GRAPH_NODES), ngeom + 1), dtype=bool)
+        self.node_lut = np.full(ngeom + 1, len(rooms.GRAPH_NODES), dtype=np.uint8)
         for g in range(ngeom):
             parts = model.geom(g).name.split("__")
             cls = parts[0].split("/")[-1]
             self.seg_lut[g + 1] = rooms.seg_class_index(cls)
             if len(parts) >= 3 and parts[2].startswith("r"):
                 room_type = parts[1]
+                if room_type in rooms.GRAPH_NODES:
+                    self.node_lut[g + 1] = rooms.room_index(room_type)
                 if room_type in rooms.SEE_OBJECTS and cls in rooms.SEE_OBJECTS[room_type]:
                     self.see_lut[rooms.room_index(room_type), g + 1] = True
         self.agent_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "agent/agent__shell")
@@ -418,6 +424,7 @@ class RoomNav(base.Task):
     def _render(self, physics):
         if not self.config.pixels:
             shape = (self.config.height, self.config.width)
+            self.segments = np.zeros(shape, dtype=np.intp)
             self.segmentation = np.zeros(shape, dtype=np.uint8)
             self.depth = np.zeros(shape, dtype=np.float32)
             self.target_fraction = 0.0
@@ -426,6 +433,7 @@ class RoomNav(base.Task):
         seg, depth = renderer.render_segments(physics.data.ptr)
         # ndarray.take: the fastest per-pixel table lookup for these sizes (fancy indexing and
         # bincount cost several times more); seg indexes the tables, whose length is ngeom + 1.
+        self.segments = seg  # segment indices, for per-pixel tables of other uses (training labels)
         self.segmentation = self._env.segment_luts[0].take(seg)
         self.depth = np.minimum(depth, MAX_DEPTH, out=depth)
         self.target_fraction = np.count_nonzero(self._see_mask.take(seg)) / seg.size
@@ -543,9 +551,9 @@ class RoomNavEnvironment(control.Environment):
             self._physics = physics
             self.renderer = rend
             self._task.house_model = hm
-            # Segment index → class and → counts for "see", via the scene's geoms.
+            # Segment index → class, → counts for "see" and → room node, via the scene's geoms.
             geoms = rend.segment_geoms + 1
-            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms])
+            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms], hm.node_lut[geoms])
         return physics
 
     # -- episodes --------------------------------------------------------------

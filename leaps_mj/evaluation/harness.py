@@ -201,7 +201,8 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, recor
 
 
 def learned_subpolicy(policy_dir: str | None):
-    """The learned sub-policies: the shipped ones, or every ``<node>.pt`` checkpoint in ``policy_dir``.
+    """The learned sub-policies: the shipped ones, or those in ``policy_dir`` (every ``<node>.pt``
+    checkpoint, and a ``shared.pt`` network for the nodes without one).
 
     Raises:
       ValueError: if the folder holds no checkpoint of a graph node, or one is unreadable.
@@ -211,9 +212,9 @@ def learned_subpolicy(policy_dir: str | None):
 
     if policy_dir is None:
         return policies.load_default()
-    targets = [t for t in rooms.GRAPH_NODES if (pathlib.Path(policy_dir) / f"{t}.pt").is_file()]
+    targets = policies.folder_targets(policy_dir)
     if not targets:
-        raise ValueError(f"policy folder {policy_dir!r} holds no sub-policy checkpoint <node>.pt "
+        raise ValueError(f"policy folder {policy_dir!r} holds no sub-policy checkpoint <node>.pt or shared.pt "
                          f"for any of {list(rooms.GRAPH_NODES)}")
     return policies.LearnedSubPolicy(policy_dir, targets)
 

@@ -1,4 +1,4 @@
-"""Returns and losses of the sub-policy trainer: n-step returns, A2C, behaviour cloning.
+"""Returns and losses of the sub-policy trainer: n-step returns, A2C, behaviour cloning, auxiliary heads.
 
 Pure functions of tensors (and the config's coefficients), kept apart from
 the rollout loop so that any source of unrolls (the local vector env, remote
@@ -11,6 +11,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from leaps_mj.learning import nets
 from leaps_mj.learning.policy_config import TrainConfig
 
 
@@ -80,3 +81,32 @@ def bc_loss(logits: torch.Tensor, labels: torch.Tensor, valid: torch.Tensor) -> 
                          reduction="none").reshape(labels.shape)
     accuracy = masked_mean((logits.argmax(-1) == labels).float(), valid).item()
     return masked_mean(ce, valid), accuracy
+
+
+def aux_loss(outputs: dict[str, torch.Tensor], labels: dict[str, torch.Tensor],
+             valid: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    """The auxiliary losses of an unroll, summed with equal weights (all tensors (T, B, ...)).
+
+    Binary cross-entropy of the room-view strips and of the room-type bits,
+    Huber loss of the geodesic distance in units of ``nets.AUX_DISTANCE_SCALE``
+    metres, clipped at 2 units (beyond that the target is simply far).
+
+    Args:
+      outputs: :meth:`leaps_mj.learning.nets.ActorCritic.aux_outputs`.
+      labels: ``room_view`` (T, B, K + 1, C), ``semantic`` (T, B, K) and
+        ``target_distance`` (T, B), as the training environments give them.
+      valid: (T, B) mask of the steps that count.
+
+    Returns:
+      (loss, scalars for logging: the loss, the room-view accuracy and the
+      distance error in metres).
+    """
+    view = F.binary_cross_entropy_with_logits(outputs["view"], labels["room_view"].float(), reduction="none")
+    here = F.binary_cross_entropy_with_logits(outputs["here"], labels["semantic"].float(), reduction="none")
+    distance = (labels["target_distance"].float() / nets.AUX_DISTANCE_SCALE).clamp(max=2.0)
+    huber = F.smooth_l1_loss(outputs["distance"], distance, reduction="none")
+    loss = masked_mean(view.mean((-1, -2)) + here.mean(-1) + huber, valid)
+    view_accuracy = masked_mean(((outputs["view"] > 0) == (labels["room_view"] > 0)).float().mean((-1, -2)), valid)
+    error = masked_mean((outputs["distance"].clamp(max=2.0) - distance).abs(), valid) * nets.AUX_DISTANCE_SCALE
+    return loss, {"aux_loss": loss.item(), "aux_view_accuracy": view_accuracy.item(),
+                  "aux_distance_error": error.item()}

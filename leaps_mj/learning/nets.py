@@ -6,7 +6,10 @@ Three networks, each built from a frozen config dataclass:
   segmentation + depth frame, a linear layer, an LSTM and policy / value
   heads, trained with A2C/A3C on ``t_max``-step unrolls. With
   ``PolicyConfig(use_semantic=True)`` it is the semantic-augmented policy μ_s,
-  which also sees the room-type bits and the target one-hot.
+  which also sees the room-type bits and the target one-hot. With
+  ``target_input=True`` one network serves every graph node (it reads the
+  node's one-hot, ``node``); with ``aux=True`` it has auxiliary heads that
+  only training reads (:meth:`ActorCritic.aux_outputs`).
 * :class:`RoomClassifier` — predicts the K room-type bits from 4 views with a
   shared per-view CNN and a learned attention over the views.
 * :class:`ControllerNet` — the LSTM controller of the HRL baseline, choosing
@@ -14,7 +17,8 @@ Three networks, each built from a frozen config dataclass:
 
 Observations follow the environment's keys, batched: ``segmentation`` int
 (B, H, W) class ids in ``[0, NUM_SEG_CLASSES)``, ``depth`` float (B, H, W) in
-metres, ``semantic`` (B, K) room-type bits and ``target`` (B, K) one-hot.
+metres, ``semantic`` (B, K) room-type bits, ``target`` (B, K) one-hot and
+``node`` (B, K + 1) one-hot of the graph node a shared sub-policy heads for.
 :meth:`ActorCritic.preprocess` turns the numpy observations into tensors.
 
 :func:`save_checkpoint` / :func:`load_policy` store a network with its config,
@@ -42,6 +46,11 @@ CHECKPOINT_FORMAT = "leaps_mj.nets/1"
 
 #: (h, c) of an LSTM, each (B, units).
 State = tuple[torch.Tensor, torch.Tensor]
+
+#: Vertical strips of the frame in the auxiliary room-view label (left to right).
+VIEW_COLUMNS = 5
+#: Metres per unit of the auxiliary distance head (distances are clipped at 2 units).
+AUX_DISTANCE_SCALE = 5.0
 
 
 def _check_positive(name: str, value: Any) -> None:
@@ -86,6 +95,14 @@ class PolicyConfig:
       max_depth: Depth is clipped to ``[0, max_depth]`` metres and scaled to [0, 1].
       use_semantic: The semantic-augmented policy μ_s: concatenate the
         room-type bits and the target one-hot to the features before the LSTM.
+      target_input: One network for every graph node: concatenate the
+        node's one-hot (``node``, K + 1 floats) to the LSTM input and to the
+        heads' input. Pixels only otherwise, as μ(θ) must be.
+      aux: Add auxiliary heads, read only by training losses: which graph
+        nodes' rooms each of :data:`VIEW_COLUMNS` vertical strips of the
+        frame shows (from the frame features), the room-type bits of where
+        the agent stands and the geodesic distance to the target (from the
+        LSTM state).
       num_classes: Number of segmentation classes.
       num_actions: Number of discrete actions.
     """
@@ -100,6 +117,8 @@ class PolicyConfig:
     seg_embed: int = 8
     max_depth: float = 10.0
     use_semantic: bool = False
+    target_input: bool = False
+    aux: bool = False
     num_classes: int = rooms.NUM_SEG_CLASSES
     num_actions: int = rooms.NUM_ACTIONS
 
@@ -109,8 +128,9 @@ class PolicyConfig:
         _check_positive_tuple("conv_channels", self.conv_channels)
         for name in ("kernel", "stride", "hidden", "lstm", "num_actions"):
             _check_positive(name, getattr(self, name))
-        if not isinstance(self.use_semantic, bool):
-            raise ValueError(f"use_semantic must be a bool, got {self.use_semantic!r}")
+        for name in ("use_semantic", "target_input", "aux"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,7 +274,9 @@ class ActorCritic(_Net):
     """CNN + LSTM actor-critic over segmentation + depth (the sub-policy μ(θ)).
 
     conv stack -> Linear(hidden) -> ReLU -> [+ semantic bits, target one-hot
-    when ``use_semantic``] -> LSTMCell(lstm) -> policy logits and value.
+    when ``use_semantic``] [+ node one-hot when ``target_input``] ->
+    LSTMCell(lstm) -> [+ node one-hot when ``target_input``] -> policy logits
+    and value.
 
     The LSTM runs step by step (an ``LSTMCell``) so that :meth:`forward` and
     :meth:`forward_sequence` compute the same function and episode boundaries
@@ -278,10 +300,21 @@ class ActorCritic(_Net):
             dummy = torch.zeros(1, self.pixels.channels, config.height, config.width)
             flat = self.conv(dummy).shape[1]
         self.fc = nn.Sequential(_layer_init(nn.Linear(flat, config.hidden)), nn.ReLU())
-        lstm_in = config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0)
+        nodes = len(rooms.GRAPH_NODES) if config.target_input else 0
+        lstm_in = config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0) + nodes
         self.lstm = _lstm_cell(lstm_in, config.lstm)
-        self.policy = _layer_init(nn.Linear(config.lstm, config.num_actions), std=0.01)
-        self.value = _layer_init(nn.Linear(config.lstm, 1), std=1.0)
+        self.policy = _layer_init(nn.Linear(config.lstm + nodes, config.num_actions), std=0.01)
+        self.value = _layer_init(nn.Linear(config.lstm + nodes, 1), std=1.0)
+        if config.aux:
+            self.aux_view = _layer_init(nn.Linear(config.hidden, len(rooms.GRAPH_NODES) * VIEW_COLUMNS), std=0.01)
+            self.aux_here = _layer_init(nn.Linear(config.lstm + nodes, rooms.NUM_ROOM_TYPES), std=0.01)
+            self.aux_distance = _layer_init(nn.Linear(config.lstm + nodes, 1), std=0.01)
+
+    def input_keys(self) -> tuple[str, ...]:
+        """Observation keys the network reads."""
+        cfg = self.config
+        return (("segmentation", "depth") + (("semantic", "target") if cfg.use_semantic else ())
+                + (("node",) if cfg.target_input else ()))
 
     @staticmethod
     def preprocess(
@@ -290,8 +323,8 @@ class ActorCritic(_Net):
         """Converts numpy observations to tensors of the dtypes the net takes.
 
         Shapes are kept, so both (B, ...) and (T, B, ...) batches work. Keys
-        other than ``segmentation``, ``depth``, ``semantic`` and ``target``
-        are dropped.
+        other than ``segmentation``, ``depth``, ``semantic``, ``target`` and
+        ``node`` are dropped.
 
         Raises:
           ValueError: if a segmentation id is outside ``[0, NUM_SEG_CLASSES)``.
@@ -305,7 +338,7 @@ class ActorCritic(_Net):
                     f"expected [0, {rooms.NUM_SEG_CLASSES})"
                 )
             out["segmentation"] = torch.as_tensor(seg, dtype=torch.long, device=device)
-        for key in ("depth", "semantic", "target"):
+        for key in ("depth", "semantic", "target", "node"):
             if key in obs:
                 out[key] = torch.as_tensor(np.asarray(obs[key]), dtype=torch.float32, device=device)
         return out
@@ -315,23 +348,29 @@ class ActorCritic(_Net):
         zeros = torch.zeros(batch, self.config.lstm, device=device)
         return zeros, zeros.clone()
 
-    def _features(self, obs: Mapping[str, torch.Tensor], lead: int) -> torch.Tensor:
-        """LSTM inputs for observations with ``lead`` leading dims, flattened to (N, F)."""
+    def _features(self, obs: Mapping[str, torch.Tensor], lead: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Frame features (N, hidden) and LSTM inputs (N, F) for observations with ``lead`` leading dims."""
         cfg = self.config
-        keys = ("segmentation", "depth") + (("semantic", "target") if cfg.use_semantic else ())
-        _require_keys(obs, keys)
+        _require_keys(obs, self.input_keys())
         seg, depth = obs["segmentation"], obs["depth"]
         _check_frames("segmentation", seg, cfg.width, cfg.height, lead)
         _check_frames("depth", depth, cfg.width, cfg.height, lead)
-        x = self.pixels(seg.reshape(-1, cfg.height, cfg.width), depth.reshape(-1, cfg.height, cfg.width))
-        x = self.fc(self.conv(x))
-        if cfg.use_semantic:
-            expected = tuple(seg.shape[:lead]) + (rooms.NUM_ROOM_TYPES,)
-            for key in ("semantic", "target"):
-                if tuple(obs[key].shape) != expected:
-                    raise ValueError(f"{key} has shape {tuple(obs[key].shape)}; expected {expected}")
-            x = torch.cat([x, *(obs[k].float().reshape(x.shape[0], -1) for k in ("semantic", "target"))], dim=1)
-        return x
+        frame = self.fc(self.conv(self.pixels(seg.reshape(-1, cfg.height, cfg.width),
+                                               depth.reshape(-1, cfg.height, cfg.width))))
+        extra = []
+        for key in self.input_keys()[2:]:
+            width = len(rooms.GRAPH_NODES) if key == "node" else rooms.NUM_ROOM_TYPES
+            expected = tuple(seg.shape[:lead]) + (width,)
+            if tuple(obs[key].shape) != expected:
+                raise ValueError(f"{key} has shape {tuple(obs[key].shape)}; expected {expected}")
+            extra.append(obs[key].float().reshape(frame.shape[0], -1))
+        return frame, torch.cat([frame, *extra], dim=1) if extra else frame
+
+    def _head_input(self, h: torch.Tensor, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """The LSTM output, with the node one-hot when the network is shared by the nodes."""
+        if not self.config.target_input:
+            return h
+        return torch.cat([h, obs["node"].float().reshape(*h.shape[:-1], -1)], dim=-1)
 
     def _heads(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.policy(h), self.value(h).squeeze(-1)
@@ -353,9 +392,9 @@ class ActorCritic(_Net):
         Returns:
           logits (B, num_actions), value (B,), new state.
         """
-        x = self._features(obs, lead=1)
+        _, x = self._features(obs, lead=1)
         h, c = self.lstm(x, _reset(state, done_mask))
-        logits, value = self._heads(h)
+        logits, value = self._heads(self._head_input(h, obs))
         return logits, value, (h, c)
 
     def forward_sequence(
@@ -378,7 +417,18 @@ class ActorCritic(_Net):
         Returns:
           logits (T, B, num_actions), values (T, B), state after the last step.
         """
-        x = self._features(obs, lead=2)
+        out = self.unroll(obs, state, dones)
+        return out["logits"], out["values"], out["state"]
+
+    def unroll(self, obs: Mapping[str, torch.Tensor], state: State, dones: torch.Tensor) -> dict[str, Any]:
+        """:meth:`forward_sequence` with what the auxiliary heads read.
+
+        Returns:
+          ``logits``, ``values`` and ``state`` as :meth:`forward_sequence`,
+          ``frame`` (T, B, hidden) frame features and ``head`` (T, B, F) the
+          heads' input (LSTM outputs, with the node one-hot when shared).
+        """
+        frame, x = self._features(obs, lead=2)
         steps, batch = obs["segmentation"].shape[:2]
         if tuple(dones.shape) != (steps, batch):
             raise ValueError(f"dones has shape {tuple(dones.shape)}; expected (T, B) = ({steps}, {batch})")
@@ -387,8 +437,29 @@ class ActorCritic(_Net):
         for t in range(steps):
             state = self.lstm(x[t], _reset(state, dones[t]))
             hs.append(state[0])
-        logits, values = self._heads(torch.stack(hs))
-        return logits, values, state
+        head = self._head_input(torch.stack(hs), obs)
+        logits, values = self._heads(head)
+        return {"logits": logits, "values": values, "state": state, "frame": frame.reshape(steps, batch, -1),
+                "head": head}
+
+    def aux_outputs(self, out: dict[str, Any]) -> dict[str, torch.Tensor]:
+        """The auxiliary heads' outputs for an :meth:`unroll` (``aux=True`` only).
+
+        Returns:
+          ``view`` (T, B, K + 1, VIEW_COLUMNS) logits of "this strip shows a
+          room of node k", ``here`` (T, B, K) logits of the room-type bits and
+          ``distance`` (T, B) the predicted geodesic distance (in units of
+          :data:`AUX_DISTANCE_SCALE` metres).
+
+        Raises:
+          ValueError: if the network has no auxiliary heads.
+        """
+        if not self.config.aux:
+            raise ValueError("this network has no auxiliary heads (PolicyConfig.aux is False)")
+        steps, batch = out["head"].shape[:2]
+        view = self.aux_view(out["frame"]).reshape(steps, batch, len(rooms.GRAPH_NODES), VIEW_COLUMNS)
+        return {"view": view, "here": self.aux_here(out["head"]),
+                "distance": self.aux_distance(out["head"]).squeeze(-1)}
 
 
 class RoomClassifier(_Net):

@@ -3,7 +3,9 @@
 A sub-policy has ``reset(target)`` (a new run towards a room type, or the
 untyped ``indoor`` node; resets the LSTM state) and ``act(timestep) -> int``.
 :class:`LearnedSubPolicy` holds one network per target, loaded from
-``<folder>/<target>.pt`` as written by ``python -m leaps_mj.train policy``.
+``<folder>/<target>.pt`` as written by ``python -m leaps_mj.train policy``,
+or one network shared by the targets, ``<folder>/shared.pt`` (``--shared
+true``), which reads the one-hot of the node it heads for.
 :func:`load_default` loads the
 checkpoints shipped with the package (the ``cpu`` preset, 40x30 frames); they
 act on 40x30 environments or on frames of an integer multiple of that size
@@ -25,6 +27,8 @@ import torch
 from leaps_mj.learning import nets
 from leaps_mj.world import rooms
 
+#: File name (without ``.pt``) of one network shared by every graph node.
+SHARED = "shared"
 #: Folder of the shipped checkpoints (cpu preset).
 DEFAULT_DIR = rooms.DATA_DIR / "policies" / "cpu"
 #: The command that trains them.
@@ -43,10 +47,12 @@ class LearnedSubPolicy:
     Networks trained with ``use_semantic`` (μ_s) also get the observation's
     ``semantic`` bits and the one-hot of the target given to :meth:`reset`
     (the target they were trained for), so they act in any environment
-    whatever its own target.
+    whatever its own target. A shared network (``target_input``) gets the
+    one-hot of the graph node given to :meth:`reset`.
 
     Args:
-      folder: Folder with one ``<target>.pt`` checkpoint per target.
+      folder: Folder with one ``<target>.pt`` checkpoint per target, or a
+        ``shared.pt`` serving every target without its own file.
       targets: Targets to load (default: the 8 room types and ``indoor``).
       greedy: Take the most likely action instead of sampling one.
       seed: Seed of the action sampling.
@@ -73,13 +79,19 @@ class LearnedSubPolicy:
             raise ValueError("targets is empty: expected at least one room type")
         self.nets: dict[str, nets.ActorCritic] = {}
         self.metadata: dict[str, dict] = {}
+        loaded: dict[pathlib.Path, tuple] = {}
         for target in targets:
             rooms.room_index(target)
-            model, config, extra = nets.load_policy(folder / f"{target}.pt", width, height)
+            path = checkpoint_path(folder, target)
+            if path not in loaded:
+                loaded[path] = nets.load_policy(path, width, height)
+            model, config, extra = loaded[path]
             if not isinstance(model, nets.ActorCritic) or config.use_semantic != use_semantic:
                 kind = "semantic-augmented policy (μ_s)" if use_semantic else "pixel-only sub-policy"
-                raise ValueError(f"{folder / f'{target}.pt'} is not a {kind} ({type(model).__name__}, "
+                raise ValueError(f"{path} is not a {kind} ({type(model).__name__}, "
                                  f"use_semantic={getattr(config, 'use_semantic', None)})")
+            if config.target_input and target not in extra.get("targets", rooms.GRAPH_NODES):
+                raise ValueError(f"{path} is shared by {extra['targets']}, not trained for {target!r}")
             width, height = config.width, config.height
             self.nets[target] = model
             self.metadata[target] = extra
@@ -108,6 +120,8 @@ class LearnedSubPolicy:
         self._net = self.nets[target]
         self._state = self._net.initial_state(1)
         self._target_onehot = torch.as_tensor(rooms.target_onehot(target), dtype=torch.float32)[None]
+        self._node_onehot = torch.nn.functional.one_hot(torch.tensor([rooms.room_index(target)]),
+                                                        len(rooms.GRAPH_NODES)).float()
 
     def _frame(self, frame) -> np.ndarray:
         """The frame at the policy's resolution (subsampled from an integer multiple)."""
@@ -138,15 +152,34 @@ class LearnedSubPolicy:
         if self.use_semantic:
             x["semantic"] = torch.as_tensor(np.asarray(obs["semantic"], np.float32)[None])
             x["target"] = self._target_onehot
+        if self._net.config.target_input:
+            x["node"] = self._node_onehot
         logits, _, self._state = self._net(x, self._state)
         if self.greedy:
             return int(logits.argmax(-1))
         return int(torch.multinomial(torch.softmax(logits[0], -1), 1, generator=self._generator))
 
 
+def checkpoint_path(folder: str | os.PathLike, target: str) -> pathlib.Path:
+    """The checkpoint serving ``target`` in a folder: ``<target>.pt``, else ``shared.pt``, else the
+    (missing) ``<target>.pt``, which loading then names."""
+    folder = pathlib.Path(folder)
+    own = folder / f"{target}.pt"
+    shared = folder / f"{SHARED}.pt"
+    return shared if not own.is_file() and shared.is_file() else own
+
+
+def folder_targets(folder: str | os.PathLike) -> tuple[str, ...]:
+    """The graph nodes a folder of checkpoints serves (own files, or all of a shared network's targets)."""
+    folder = pathlib.Path(folder)
+    shared = folder / f"{SHARED}.pt"
+    served = set(nets.load_policy(shared)[2].get("targets", rooms.GRAPH_NODES)) if shared.is_file() else set()
+    return tuple(t for t in rooms.GRAPH_NODES if (folder / f"{t}.pt").is_file() or t in served)
+
+
 def _load_shipped(folder: pathlib.Path, targets: Sequence[str], command: str, use_semantic: bool,
                   greedy: bool, seed: int) -> LearnedSubPolicy:
-    missing = [t for t in targets if not (folder / f"{t}.pt").is_file()]
+    missing = [t for t in targets if not checkpoint_path(folder, t).is_file()]
     if missing:
         raise ValueError(f"no shipped checkpoints for {missing} in {folder}; train them with `{command}`")
     return LearnedSubPolicy(folder, targets, greedy=greedy, seed=seed, use_semantic=use_semantic)

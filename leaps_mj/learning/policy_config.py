@@ -28,6 +28,14 @@ class TrainConfig:
         (:class:`leaps_mj.learning.nets.PolicyConfig`).
       use_semantic: Train the semantic-augmented policy μ_s: the network
         also reads the room-type bits and the target one-hot.
+      shared: Train one network for all the run's targets (it reads the
+        graph node's one-hot; episodes draw their target among the run's
+        targets present in the house, over all the training houses) instead
+        of one network per target. Written as ``shared.pt``.
+      aux_coef: Weight of the auxiliary losses (0: no auxiliary heads): the
+        rooms each vertical strip of the frame shows, the room-type bits
+        where the agent stands and the geodesic distance to the target,
+        labels the simulator gives for free and that only training reads.
       method: "a2c", "dagger" or "dagger+a2c".
       total_steps: Environment steps per target (all environments together).
       dagger_fraction: Share of the iterations spent on DAgger in "dagger+a2c".
@@ -76,6 +84,8 @@ class TrainConfig:
     lstm: int = 256
     seg_embed: int = 8
     use_semantic: bool = False
+    shared: bool = False
+    aux_coef: float = 0.0
     method: str = "a2c"
     total_steps: int = 20_000_000
     dagger_fraction: float = 0.7
@@ -124,9 +134,11 @@ class TrainConfig:
         for name in ("lr", "start_distance", "max_distance", "max_grad_norm"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
-        for name in ("weight_decay", "entropy", "value_coef", "logits_l2", "distance_step"):
+        for name in ("weight_decay", "entropy", "value_coef", "logits_l2", "distance_step", "aux_coef"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
+        if self.shared and self.use_semantic:
+            raise ValueError("shared and use_semantic: expected at most one (μ_s is trained per target)")
         if not isinstance(self.learner_envs, int) or not 0 <= self.learner_envs <= self.num_envs:
             raise ValueError(f"learner_envs {self.learner_envs!r}: expected an integer in [0, num_envs]")
         self.policy_config()  # validates the network fields
@@ -135,7 +147,8 @@ class TrainConfig:
         """The network architecture of this run."""
         return nets.PolicyConfig(width=self.width, height=self.height, conv_channels=self.conv_channels,
                                  kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed,
-                                 use_semantic=self.use_semantic)
+                                 use_semantic=self.use_semantic, target_input=self.shared,
+                                 aux=self.aux_coef > 0)
 
     @property
     def batch(self) -> int:
@@ -179,6 +192,14 @@ PRESETS = {
         num_houses=32, width=40, height=30, conv_channels=(16, 32, 32, 32), hidden=128, lstm=64,
         method="dagger", total_steps=108_000, beta_min=0.5, learner_envs=2, replay=3, num_envs=8,
         start_distance=4.0, curriculum_iterations=90, max_distance=13.0, checkpoint_every=10),
+    # The hop recipe (issue 13): one network for the 9 graph nodes over all the training
+    # houses, auxiliary losses, the release's task distribution (starts within 2 doors,
+    # 60-step episodes), 16 environments in 2 worker processes.
+    "hop": TrainConfig(
+        width=40, height=30, conv_channels=(16, 32, 32, 32), hidden=128, lstm=128, shared=True, aux_coef=0.5,
+        method="dagger", total_steps=960_000, beta_min=0.5, learner_envs=4, replay=2, buffer_steps=96_000,
+        num_envs=16, horizon=60, start_distance=20.0, distance_step=0.0, max_distance=20.0, max_start_doors=2,
+        checkpoint_every=10),
     # The paper's setting, for a GPU or a cluster (not run on the CPU machine).
     "paper": TrainConfig(),
 }

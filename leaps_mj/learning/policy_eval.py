@@ -19,16 +19,18 @@ from leaps_mj.learning import nets
 from leaps_mj.learning.policy_config import TrainConfig
 
 
-def evaluate(subpolicies: dict[str, Any], target: str, config: TrainConfig, split: str,
+def evaluate(subpolicies: dict[str, Any], targets: Sequence[str], config: TrainConfig, split: str,
              seed: int) -> dict[str, dict[str, float]]:
     """Success of sub-policies on the same sampled episodes of a split (sparse reward).
 
     Starts lie within the distance the curriculum reached at the end of
-    training; episodes last ``config.eval_horizon`` steps.
+    training (and within ``config.max_start_doors`` doors, where set);
+    episodes last ``config.eval_horizon`` steps and draw their target among
+    ``targets`` present in the house.
 
     Args:
       subpolicies: Sub-policies (``reset(target)``, ``act(timestep)``) by name.
-      target: Target room type.
+      targets: Target room types.
       config: The run's configuration.
       split: "train" or "valid".
       seed: Seed of the episode draws.
@@ -38,15 +40,15 @@ def evaluate(subpolicies: dict[str, Any], target: str, config: TrainConfig, spli
     """
     distance = config.start_distance_at(config.iterations - 1)
     env = roomnav.load(config.dataset, split, seed=seed, width=config.width, height=config.height,
-                        horizon=config.eval_horizon, reward="sparse", targets=(target,),
-                        max_start_distance=distance)
+                        horizon=config.eval_horizon, reward="sparse", targets=tuple(targets),
+                        max_start_distance=distance, max_start_doors=config.max_start_doors or None)
     outcomes = {name: [] for name in subpolicies}
     try:
         for _ in range(config.eval_episodes):
             spec = env.sample_episode()
             for name, policy in subpolicies.items():
                 ts = env.reset_to(spec)
-                policy.reset(target)
+                policy.reset(spec.target)
                 while not ts.last():
                     ts = env.step(policy.act(ts))
                 outcomes[name].append((ts.discount == 0.0, env.task.steps))

@@ -59,13 +59,16 @@ import numpy as np
 import torch
 
 from leaps_mj.environment import vector
-from leaps_mj.learning import nets
+from leaps_mj.learning import nets, policies
 from leaps_mj.learning import trainer as trainer_lib
-from leaps_mj.learning.losses import a2c_loss, bc_loss, masked_mean, n_step_returns
+from leaps_mj.learning.losses import a2c_loss, aux_loss, bc_loss, masked_mean, n_step_returns
 from leaps_mj.learning.policy_config import PRESETS, TrainConfig
 from leaps_mj.learning.policy_eval import evaluate, plot_curves
 from leaps_mj.learning.training_env import training_houses, training_vector_env
 from leaps_mj.world import rooms
+
+#: The name of a shared run's one network (``--shared true``): ``<out>/shared.pt``.
+SHARED = policies.SHARED
 
 # -- rollouts ------------------------------------------------------------------------------------
 
@@ -77,23 +80,21 @@ class Unroll:
     Segmentation is uint8, depth float16 (the aggregated dataset keeps many).
     """
 
-    segmentation: np.ndarray  # (T, B, H, W) uint8
-    depth: np.ndarray  # (T, B, H, W) float16
+    obs: dict[str, np.ndarray]  # the network's inputs (T, B, ...): segmentation, depth [, semantic, target] [, node]
     first: np.ndarray  # (T, B) float32, 1 where an episode began
     valid: np.ndarray  # (T, B) float32, 0 at LAST observations (their action is ignored)
     labels: np.ndarray  # (T, B) int64 expert actions (-1: none)
     state: tuple[np.ndarray, np.ndarray]  # LSTM (h, c) at the unroll's start
-    semantic: np.ndarray | None = None  # (T, B, K) uint8 room-type bits (μ_s only)
-    target: np.ndarray | None = None  # (T, B, K) uint8 target one-hot (μ_s only)
+    aux: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)  # auxiliary labels (T, B, ...)
 
     def tensors(self, device) -> tuple[dict, torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
-        arrays = {"segmentation": self.segmentation, "depth": self.depth}
-        if self.semantic is not None:
-            arrays.update(semantic=self.semantic, target=self.target)
-        obs = nets.ActorCritic.preprocess(arrays, device)
+        obs = nets.ActorCritic.preprocess(self.obs, device)
         first = torch.as_tensor(self.first, device=device)
         state = tuple(torch.as_tensor(s, device=device) for s in self.state)
         return obs, first, state
+
+    def aux_tensors(self, device) -> dict[str, torch.Tensor]:
+        return {k: torch.as_tensor(v, device=device) for k, v in self.aux.items()}
 
 
 class EpisodeStats:
@@ -129,33 +130,46 @@ class Trainer(trainer_lib.Trainer):
 
     Args:
       config: The run's configuration.
-      target: Target room type.
+      target: Target room type, or :data:`SHARED` for the one network of a
+        ``config.shared`` run (then ``targets`` are its targets).
       out: Output folder of the run (shared by the targets).
       device: Torch device of the network.
       progress: Show a tqdm progress bar.
+      targets: The targets of a shared network (default: the 9 graph nodes).
     """
 
     csv_fields = ("iteration", "global_step", "phase", "SPS", "beta", "start_distance", "success_rate",
                   "episode_return", "mixed_success_rate", "mixed_episode_return", "episodes",
                   "bc_cross_entropy", "bc_accuracy", "expert_agreement", "policy_loss", "value_loss", "entropy",
-                  "logits_l2", "grad_norm", "act_forward_seconds", "update_forward_seconds",
+                  "logits_l2", "grad_norm", "aux_loss", "aux_view_accuracy", "aux_distance_error",
+                  "act_forward_seconds", "update_forward_seconds",
                   "update_backward_seconds", "env_wait_seconds", "worker_physics_seconds", "worker_render_seconds",
                   "worker_expert_seconds")
     loss_keys = frozenset({"policy_loss", "value_loss", "entropy", "logits_l2", "bc_cross_entropy", "bc_accuracy",
-                           "grad_norm", "expert_agreement"})
+                           "grad_norm", "expert_agreement", "aux_loss", "aux_view_accuracy", "aux_distance_error"})
 
     def __init__(self, config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
-                 progress: bool = True):
-        rooms.room_index(target)
+                 progress: bool = True, targets: Sequence[str] = rooms.GRAPH_NODES):
+        if (target == SHARED) != config.shared:
+            raise ValueError(f"target {target!r} with shared={config.shared}: a shared run trains target "
+                             f"{SHARED!r}, a per-target run one of {list(rooms.GRAPH_NODES)}")
+        if config.shared:
+            for t in targets:
+                rooms.room_index(t)
+        else:
+            rooms.room_index(target)
         super().__init__(config, pathlib.Path(out) / target, config.iterations, config.checkpoint_every,
                          progress=progress, desc=f"{target} {config.method}")
         self.target = target
+        self.targets = tuple(targets) if config.shared else (target,)
+        # Seeds and house shards are per network: the shared one takes the index after the nodes'.
+        self.index = len(rooms.GRAPH_NODES) if config.shared else rooms.room_index(target)
         self.run_dir = pathlib.Path(out)
         self.policy_path = self.run_dir / f"{target}.pt"
         self.device = torch.device(device)
         self.global_step = 0
         self.eval: dict | None = None
-        torch.manual_seed(config.seed * 1000 + rooms.room_index(target))
+        torch.manual_seed(config.seed * 1000 + self.index)
         self.model = nets.ActorCritic(config.policy_config())
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         self.resume(config.width, config.height)
@@ -165,13 +179,16 @@ class Trainer(trainer_lib.Trainer):
 
     # -- what the skeleton checkpoints and ships -----------------------------------------------
     def state(self) -> dict[str, Any]:
-        return {"target": self.target, "method": self.config.method, "global_step": self.global_step,
-                "eval": self.eval}
+        return {"target": self.target, "targets": list(self.targets), "method": self.config.method,
+                "global_step": self.global_step, "eval": self.eval}
 
     def load_state(self, extra: dict[str, Any]) -> None:
         if extra["target"] != self.target:
             raise ValueError(f"{self.state_path} holds a run for target {extra['target']!r}, not {self.target!r}; "
                              "use another --out")
+        if list(extra.get("targets", self.targets)) != list(self.targets):
+            raise ValueError(f"{self.state_path} holds a run for targets {extra['targets']}, not "
+                             f"{list(self.targets)}; use another --out")
         self.global_step, self.eval = extra["global_step"], extra.get("eval")
 
     def publish(self, extra: dict[str, Any]) -> None:
@@ -190,9 +207,10 @@ class Trainer(trainer_lib.Trainer):
     # -- training --------------------------------------------------------------------------
     def _worker_kwargs(self) -> list[dict[str, Any]]:
         c = self.config
-        shards = training_houses(c.dataset, self.target, c.num_houses, c.num_envs, self.run_dir)
+        shards = training_houses(c.dataset, None if c.shared else self.target, c.num_houses, c.num_envs,
+                                 self.run_dir, name=self.target)
         return [dict(houses_dir=str(shard), width=c.width, height=c.height, horizon=c.horizon, reward="shaped",
-                     targets=(self.target,), max_start_distance=c.start_distance_at(self.iteration),
+                     targets=self.targets, max_start_distance=c.start_distance_at(self.iteration),
                      max_start_doors=c.max_start_doors or None)
                 for shard in shards]
 
@@ -200,7 +218,7 @@ class Trainer(trainer_lib.Trainer):
     def session(self):
         """The vector environment and the carried rollout state of one ``train`` call."""
         c = self.config
-        seed = (c.seed * 1000 + rooms.room_index(self.target)) * 100_000 + self.iteration * c.num_envs
+        seed = (c.seed * 1000 + self.index) * 100_000 + self.iteration * c.num_envs
         with training_vector_env(self._worker_kwargs(), seed, c, self.iteration, c.method != "a2c") as envs:
             self._envs, self._timesteps = envs, envs.reset()
             self._state = self.model.initial_state(c.num_envs, self.device)
@@ -210,7 +228,7 @@ class Trainer(trainer_lib.Trainer):
     def iterate(self) -> dict[str, Any]:
         c = self.config
         t0 = time.perf_counter()
-        rng = np.random.default_rng([c.seed, rooms.room_index(self.target), self.iteration])
+        rng = np.random.default_rng([c.seed, self.index, self.iteration])
         gen = torch.Generator(device=self.device).manual_seed(int(rng.integers(2**63)))
         beta = c.beta_at(self.iteration)
         unroll, batch, self._timesteps, self._state, rollout_times = self._rollout(
@@ -226,22 +244,22 @@ class Trainer(trainer_lib.Trainer):
         """Collects one unroll; returns it with the A2C batch and the carried state."""
         c = self.config
         T, B = c.t_max, c.num_envs
-        seg = np.zeros((T, B, c.height, c.width), np.uint8)
-        depth = np.zeros((T, B, c.height, c.width), np.float16)
-        keys = ("segmentation", "depth") + (("semantic", "target") if c.use_semantic else ())
-        bits = {k: np.zeros((T, B, rooms.NUM_ROOM_TYPES), np.uint8) for k in keys[2:]}
+        keys = self.model.input_keys()
+        aux_keys = ("room_view", "semantic", "target_distance") if c.aux_coef > 0 else ()
+        stored = {"segmentation": np.uint8, "depth": np.float16, "target_distance": np.float32}
         first, valid = np.zeros((T, B), np.float32), np.zeros((T, B), np.float32)
         labels, actions = np.zeros((T, B), np.int64), np.zeros((T, B), np.int64)
         rewards, discounts = np.zeros((T, B)), np.zeros((T, B))
         values, bootstrap = np.zeros((T + 1, B)), np.zeros((T, B), bool)
         start_state = tuple(s.detach().cpu().numpy() for s in state)
+        columns: dict[str, np.ndarray] = {}
         times = collections.Counter()
         for t in range(T + 1):
-            obs = {k: vector.stack(timesteps, k) for k in keys + ("expert_action",)}
+            obs = {k: vector.stack(timesteps, k) for k in set(keys + aux_keys + ("expert_action",))}
             is_first = np.array([ts.first() for ts in timesteps], np.float32)
             f0 = time.perf_counter()
             with torch.no_grad():
-                x = nets.ActorCritic.preprocess(obs, self.device)
+                x = nets.ActorCritic.preprocess({k: obs[k] for k in keys}, self.device)
                 logits, value, new_state = self.model(x, state, torch.as_tensor(is_first, device=self.device))
                 learner = torch.multinomial(torch.softmax(logits, -1), 1, generator=gen).squeeze(-1).cpu().numpy()
             times["act_forward_seconds"] += self._elapsed(f0)
@@ -249,9 +267,11 @@ class Trainer(trainer_lib.Trainer):
             if t == T:
                 break
             state = new_state
-            seg[t], depth[t], first[t], labels[t] = obs["segmentation"], obs["depth"], is_first, obs["expert_action"]
-            for k, array in bits.items():
-                array[t] = obs[k]
+            for k in set(keys + aux_keys):
+                if k not in columns:
+                    columns[k] = np.zeros((T, *obs[k].shape), stored.get(k, np.uint8))
+                columns[k][t] = obs[k]
+            first[t], labels[t] = is_first, obs["expert_action"]
             valid[t] = [not ts.last() for ts in timesteps]
             expert = (rng.random(B) < beta) & (np.arange(B) >= c.learner_envs) & (labels[t] >= 0)
             actions[t] = np.where(expert, labels[t], learner)
@@ -268,7 +288,8 @@ class Trainer(trainer_lib.Trainer):
                     discounts[t, i] = c.gamma * ts.discount
                 bootstrap[t, i] = ts.last() or t == T - 1
         returns = n_step_returns(rewards, discounts, values[1:], bootstrap)
-        unroll = Unroll(seg, depth, first, valid, labels, start_state, **bits)
+        unroll = Unroll({k: columns[k] for k in keys}, first, valid, labels, start_state,
+                        {k: columns[k] for k in aux_keys})
         batch = {"actions": actions, "returns": returns.astype(np.float32)}
         return unroll, batch, timesteps, state, dict(times)
 
@@ -279,11 +300,16 @@ class Trainer(trainer_lib.Trainer):
         return time.perf_counter() - since
 
     def _unroll_forward(self, unroll: Unroll):
+        """The network over an unroll: logits, values and, with auxiliary heads, their loss (else None)."""
         t0 = time.perf_counter()
         obs, first, state = unroll.tensors(self.device)
-        logits, values, _ = self.model.forward_sequence(obs, state, first)
+        out = self.model.unroll(obs, state, first)
+        aux = None
+        if self.config.aux_coef > 0:
+            aux = aux_loss(self.model.aux_outputs(out), unroll.aux_tensors(self.device),
+                           torch.as_tensor(unroll.valid, device=self.device))
         self._times["update_forward_seconds"] += self._elapsed(t0)
-        return logits, values
+        return out["logits"], out["values"], aux
 
     def _step(self, loss: torch.Tensor) -> float:
         t0 = time.perf_counter()
@@ -294,6 +320,14 @@ class Trainer(trainer_lib.Trainer):
         self._times["update_backward_seconds"] += self._elapsed(t0)
         return norm.item()
 
+    def _with_aux(self, loss: torch.Tensor, aux, out: dict | None = None) -> torch.Tensor:
+        """``loss`` plus the weighted auxiliary loss (when there is one), logging its scalars into ``out``."""
+        if aux is None:
+            return loss
+        if out is not None:
+            out.update(aux[1])
+        return loss + self.config.aux_coef * aux[0]
+
     def _update(self, unroll: Unroll, batch: dict, rng: np.random.Generator) -> dict[str, float]:
         """One update on the fresh unroll (+ replayed DAgger updates); returns log scalars."""
         c = self.config
@@ -301,28 +335,28 @@ class Trainer(trainer_lib.Trainer):
         dev = self.device
         valid = torch.as_tensor(unroll.valid, device=dev)
         returns = torch.as_tensor(batch["returns"], device=dev)
-        logits, values = self._unroll_forward(unroll)
+        logits, values, aux = self._unroll_forward(unroll)
         out = {}
         if self.iteration < c.dagger_iterations:
             labels = torch.as_tensor(unroll.labels, device=dev)
             ce, out["bc_accuracy"] = bc_loss(logits, labels, valid)
             value_loss = 0.5 * masked_mean((returns - values) ** 2, valid)
-            out["grad_norm"] = self._step(ce + c.value_coef * value_loss)
+            out["grad_norm"] = self._step(self._with_aux(ce + c.value_coef * value_loss, aux, out))
             out["bc_cross_entropy"], out["value_loss"] = ce.item(), value_loss.item()
             self.buffer.append(unroll)
             for _ in range(c.replay):
                 old = self.buffer[int(rng.integers(len(self.buffer)))]
-                old_logits, _ = self._unroll_forward(old)
+                old_logits, _, old_aux = self._unroll_forward(old)
                 ce, _ = bc_loss(old_logits, torch.as_tensor(old.labels, device=dev),
                                 torch.as_tensor(old.valid, device=dev))
-                self._step(ce)
+                self._step(self._with_aux(ce, old_aux))
         else:
             actions = torch.as_tensor(batch["actions"], device=dev)
             loss, out = a2c_loss(logits, values, actions, returns, valid, c)
             if (unroll.labels >= 0).any():
                 _, out["expert_agreement"] = bc_loss(logits.detach(), torch.as_tensor(unroll.labels, device=dev),
                                                      valid)
-            out["grad_norm"] = self._step(loss)
+            out["grad_norm"] = self._step(self._with_aux(loss, aux, out))
         return {**out, **self._times}
 
 
@@ -330,25 +364,28 @@ class Trainer(trainer_lib.Trainer):
 
 
 def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
-               progress: bool = True, stop_after: int | None = None) -> dict | None:
-    """Trains one target to completion (resuming) and evaluates it once.
+               progress: bool = True, stop_after: int | None = None,
+               targets: Sequence[str] = rooms.GRAPH_NODES) -> dict | None:
+    """Trains one network to completion (resuming) and evaluates it once.
+
+    Args:
+      target: The target of a per-target run, :data:`SHARED` for a shared one.
+      targets: The targets of a shared network.
 
     Returns:
       The evaluation results, or None if ``stop_after`` ended the call early.
     """
-    from leaps_mj.learning import policies
-
-    trainer = Trainer(config, target, out, device=device, progress=progress)
+    trainer = Trainer(config, target, out, device=device, progress=progress, targets=targets)
     trainer.train(stop_after)
     if not trainer.finished:
         return None
     if trainer.eval is None:
-        modes = {mode: policies.LearnedSubPolicy(out, targets=(target,), greedy=mode == "greedy", seed=config.seed,
-                                                   use_semantic=config.use_semantic)
+        modes = {mode: policies.LearnedSubPolicy(out, targets=trainer.targets, greedy=mode == "greedy",
+                                                   seed=config.seed, use_semantic=config.use_semantic)
                  for mode in ("sampled", "greedy")}
-        seed = config.seed + 7919 * (1 + rooms.room_index(target))
+        seed = config.seed + 7919 * (1 + trainer.index)
         trainer.eval = {f"{split}/{mode}": result for split in ("train", "valid")
-                        for mode, result in evaluate(modes, target, config, split, seed).items()}
+                        for mode, result in evaluate(modes, trainer.targets, config, split, seed).items()}
         trainer.save()
     return trainer.eval
 
@@ -429,8 +466,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     out = pathlib.Path(args.out)
     results = {}
-    for target in targets:
-        results[target] = run_target(config, target, out, args.device, not args.no_progress, args.stop_after)
+    for target in ((SHARED,) if config.shared else targets):
+        results[target] = run_target(config, target, out, args.device, not args.no_progress, args.stop_after,
+                                     targets=targets)
     print(f"{'target':12} {'train':>8} {'valid':>8} {'valid greedy':>13}  (success on sampled episodes)")
     for target, res in results.items():
         if res is None:
@@ -439,7 +477,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{target:12} {res['train/sampled']['success_rate']:8.2f} {res['valid/sampled']['success_rate']:8.2f}"
                   f" {res['valid/greedy']['success_rate']:13.2f}")
     if all(r is not None for r in results.values()):
-        plot_curves(out, list(targets), out / "training_curves.png")
+        plot_curves(out, list(results), out / "training_curves.png")
         print(f"wrote {out / 'training_curves.png'}")
     return 0
 

@@ -19,9 +19,33 @@ import numpy as np
 
 from leaps_mj.environment import roomnav, vector
 from leaps_mj.environment.expert import GeodesicExpert
+from leaps_mj.learning import nets
 from leaps_mj.learning.policy_config import TrainConfig
 from leaps_mj.world import dataset as dataset_lib
-from leaps_mj.world import houses
+from leaps_mj.world import houses, rooms
+
+#: Share of a vertical strip's pixels that must show a node's room for its room-view label.
+VIEW_MIN_FRACTION = 0.02
+
+
+def room_view(nodes: np.ndarray) -> np.ndarray:
+    """The room-view label of a frame of per-pixel graph nodes.
+
+    Args:
+      nodes: (H, W) ints, the graph node of each pixel's room
+        (``len(GRAPH_NODES)`` where it belongs to none: walls, doors, sky).
+
+    Returns:
+      (K + 1, VIEW_COLUMNS) uint8: 1 where at least :data:`VIEW_MIN_FRACTION`
+      of the strip's pixels show a room of that node.
+    """
+    height, width = nodes.shape
+    n = len(rooms.GRAPH_NODES)
+    columns = np.arange(width) * nets.VIEW_COLUMNS // width
+    flat = (nodes.astype(np.intp) * nets.VIEW_COLUMNS + columns).ravel()
+    counts = np.bincount(flat, minlength=(n + 1) * nets.VIEW_COLUMNS).reshape(n + 1, nets.VIEW_COLUMNS)[:n]
+    strip = height * np.bincount(columns, minlength=nets.VIEW_COLUMNS)
+    return (counts >= VIEW_MIN_FRACTION * strip).astype(np.uint8)
 
 
 class TrainingEnv:
@@ -33,7 +57,14 @@ class TrainingEnv:
       state (-1 when labelling is off), the DAgger label;
     * ``step_seconds`` (float64 (3,)): seconds this step spent in physics and
       collisions (``Task.before_step``), in rendering and the success test
-      (``Task.after_step``) and in the expert — for the throughput benchmark.
+      (``Task.after_step``) and in the expert — for the throughput benchmark;
+    * with ``config.shared``, ``node`` (uint8 (K + 1,)): the one-hot of the
+      episode's graph node, the shared network's target input;
+    * with ``config.aux_coef > 0``, the auxiliary labels: ``room_view``
+      (uint8 (K + 1, VIEW_COLUMNS)), 1 where at least
+      :data:`VIEW_MIN_FRACTION` of a vertical strip of the frame shows a room
+      of that node (its floor, ceiling or furniture), and ``target_distance``
+      (float32), the geodesic metres to the target.
 
     It also applies the distance curriculum: each new episode's start is
     bounded by ``config.start_distance_at(iteration)``, where the iteration is
@@ -77,6 +108,12 @@ class TrainingEnv:
         self._times[2] += time.perf_counter() - t0
         obs = dict(ts.observation, expert_action=np.int64(label), step_seconds=self._times.copy())
         self._times[:] = 0.0
+        task = self._env.task
+        if self._config.shared:
+            obs["node"] = np.eye(len(rooms.GRAPH_NODES), dtype=np.uint8)[task.target_index]
+        if self._config.aux_coef > 0:
+            obs["room_view"] = room_view(self._env.segment_luts[2].take(task.segments))
+            obs["target_distance"] = np.float32(task.distance)
         return ts._replace(observation=obs)
 
     def reset(self):
@@ -131,26 +168,28 @@ def training_vector_env(worker_kwargs: Sequence[dict], seed: int, config: TrainC
     return vector.VectorEnv(len(worker_kwargs), seed, make_env=make_env, worker_kwargs=list(worker_kwargs))
 
 
-def training_houses(dataset: str, target: str, num_houses: int, num_shards: int,
-                    out: pathlib.Path) -> list[pathlib.Path]:
+def training_houses(dataset: str, target: str | None, num_houses: int, num_shards: int,
+                    out: pathlib.Path, name: str | None = None) -> list[pathlib.Path]:
     """Shards of the training houses that have a ``target`` room, one folder of links per worker.
 
     The houses are the first ``num_houses`` (0: all) of the train split that
-    have a room of type ``target``; worker ``i`` gets every ``num_shards``-th
-    one from the ``i``-th on (or house ``i mod n`` when there are fewer
-    houses than workers).
+    have a room of type ``target`` (any house when ``target`` is None);
+    worker ``i`` gets every ``num_shards``-th one from the ``i``-th on (or
+    house ``i mod n`` when there are fewer houses than workers). The folders
+    lie under ``out/houses/<name>`` (default: the target).
 
     Raises:
       ValueError: if no training house has a ``target`` room.
     """
-    files = [p for p in dataset_lib.list_houses(dataset, "train") if target in houses.House.load(p).room_types]
+    files = [p for p in dataset_lib.list_houses(dataset, "train")
+             if target is None or target in houses.House.load(p).room_types]
     if num_houses:
         files = files[:num_houses]
     if not files:
         raise ValueError(f"no training house of dataset {dataset!r} has a room of type {target!r}")
     folders = []
     for i in range(num_shards):
-        folder = out / "houses" / target / f"worker_{i:03d}"
+        folder = out / "houses" / (name or target) / f"worker_{i:03d}"
         folder.mkdir(parents=True, exist_ok=True)
         for path in files[i::num_shards] or [files[i % len(files)]]:
             for src in (path, path.with_suffix(".xml")):
