@@ -1,4 +1,4 @@
-"""Shared fixtures: a tiny generated house dataset with fixed episodes."""
+"""Shared fixtures: a tiny generated house dataset with fixed episodes, a small local Ray instance."""
 
 import pathlib
 
@@ -18,3 +18,12 @@ def tiny_dataset(tmp_path_factory) -> pathlib.Path:
         eps, _ = episodes.generate(str(out), split, per_length=5, seed=0)
         episodes.write(out / "episodes" / f"{split}.jsonl", eps)
     return out
+
+
+@pytest.fixture(scope="module")
+def ray_local():
+    """One small local Ray instance (2 CPUs, no dashboard, workers' logs kept off the terminal) per test module."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    ray.shutdown()

@@ -26,6 +26,7 @@ def random_obs(lead, width=W, height=H, seed=0):
         "depth": rng.uniform(0.0, 15.0, size=(*lead, height, width)).astype(np.float32),
         "semantic": rng.integers(0, 2, size=(*lead, K)).astype(np.float32),
         "target": onehot,
+        "node": np.eye(K + 1, dtype=np.float32)[rng.integers(0, K + 1, size=lead)],
     }
 
 
@@ -90,6 +91,31 @@ def test_semantic_inputs_change_output_and_are_required():
         model({k: v for k, v in obs.items() if k != "target"}, model.initial_state(2))
     with pytest.raises(ValueError, match="semantic"):
         model({**obs, "semantic": torch.zeros(2, K + 1)}, model.initial_state(2))
+
+
+def test_shared_network_reads_the_node_and_steps_like_its_sequence():
+    """A target_input net: the node one-hot changes the action and is required; stepping equals the
+    unroll; the auxiliary heads have the documented shapes and exist only with aux."""
+    model = small_policy(target_input=True, aux=True)
+    steps, batch = 4, 3
+    seq = nets.ActorCritic.preprocess(random_obs((steps, batch)))
+    assert model.input_keys() == ("segmentation", "depth", "node")
+    with torch.no_grad():
+        out = model.unroll(seq, model.initial_state(batch), torch.zeros(steps, batch))
+        state = model.initial_state(batch)
+        for t in range(steps):
+            logits, value, state = model({k: v[t] for k, v in seq.items()}, state)
+            torch.testing.assert_close(logits, out["logits"][t], atol=1e-5, rtol=0)
+        other, _, _ = model({**{k: v[0] for k, v in seq.items()}, "node": seq["node"][0].roll(1, dims=1)},
+                            model.initial_state(batch))
+        assert not torch.allclose(other, out["logits"][0])
+        aux = model.aux_outputs(out)
+    assert aux["view"].shape == (steps, batch, K + 1, nets.VIEW_COLUMNS)
+    assert aux["here"].shape == (steps, batch, K) and aux["distance"].shape == (steps, batch)
+    with pytest.raises(ValueError, match="node"):
+        model({k: v[0] for k, v in seq.items() if k != "node"}, model.initial_state(batch))
+    with pytest.raises(ValueError, match="no auxiliary heads"):
+        small_policy().aux_outputs(out)
 
 
 def test_bad_inputs_raise_value_error():

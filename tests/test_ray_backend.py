@@ -1,7 +1,8 @@
 """Tests for the Ray evaluation backend: the same CSV bytes as the local one, and no job lost when a worker dies.
 
-The default tests share one local Ray instance (2 CPUs, no dashboard); the
-simulated two-node cluster is slow (``python -m pytest -m slow tests/test_ray_backend.py``).
+The default tests share one local Ray instance (2 CPUs, no dashboard: the
+``ray_local`` fixture of conftest.py); the simulated two-node cluster is slow
+(``python -m pytest -m slow tests/test_ray_backend.py``).
 """
 
 import functools
@@ -17,6 +18,7 @@ ray = pytest.importorskip("ray")
 from ray import cloudpickle
 from ray.cluster_utils import Cluster
 
+from leaps_mj.environment import ray_cluster
 from leaps_mj.evaluation import harness, ray_backend
 
 # This module's helpers run inside actors, which cannot import the test module: send them by value.
@@ -25,14 +27,6 @@ cloudpickle.register_pickle_by_value(sys.modules[__name__])
 AGENTS = [harness.AGENTS["random"], harness.AGENTS["pure"]]
 #: Seconds any single wait on Ray may take in these tests.
 TIMEOUT_S = 120
-
-
-@pytest.fixture(scope="module")
-def ray_local():
-    """One small local Ray instance for the module's tests."""
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    yield
-    ray.shutdown()
 
 
 def _local_csvs(config, indices, folder) -> dict[str, bytes]:
@@ -107,7 +101,7 @@ def test_a_worker_that_cannot_start_is_an_error_not_a_retry(ray_local):
 
 
 def test_ray_address_while_ray_is_running_is_refused(ray_local):
-    with pytest.raises(ValueError, match="already initialised"), ray_backend.connected("10.0.0.1:6379"):
+    with pytest.raises(ValueError, match="already initialised"), ray_cluster.connected("10.0.0.1:6379"):
         pass
 
 
@@ -134,6 +128,6 @@ def test_two_node_cluster_gives_the_local_bytes(tiny_dataset, tmp_path):
 def test_workers_get_the_drivers_gl_settings_but_not_a_disabled_backend(monkeypatch):
     monkeypatch.setenv("MUJOCO_GL", "osmesa")
     monkeypatch.setenv("MUJOCO_EGL_DEVICE_ID", "1")
-    assert {"MUJOCO_GL": "osmesa", "MUJOCO_EGL_DEVICE_ID": "1"}.items() <= ray_backend.worker_env().items()
+    assert {"MUJOCO_GL": "osmesa", "MUJOCO_EGL_DEVICE_ID": "1"}.items() <= ray_cluster.worker_env().items()
     monkeypatch.setenv("MUJOCO_GL", "disabled")
-    assert "MUJOCO_GL" not in ray_backend.worker_env()
+    assert "MUJOCO_GL" not in ray_cluster.worker_env()

@@ -5,6 +5,8 @@ reward, the "see" success test, ``load``), off-screen rendering
 (:mod:`render`) over batched static meshes (:mod:`batching`), fixed
 evaluation episodes and the loop that runs an agent on one
 (:mod:`episodes`), N environments in worker processes (:mod:`vector`), the
-gymnasium adapter (:mod:`gym_adapter`) and the geodesic expert
-(:mod:`expert`). Imports only :mod:`leaps_mj.world`.
+gymnasium adapter (:mod:`gym_adapter`), the geodesic expert
+(:mod:`expert`) and how Ray workers are connected and started
+(:mod:`ray_cluster`, for the Ray backends above). Imports only
+:mod:`leaps_mj.world`.
 """

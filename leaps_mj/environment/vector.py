@@ -110,8 +110,8 @@ def _worker(conn, make_env, env_kwargs, seeds, slots):
         conn.close()
 
 
-def _split(num_envs: int, num_workers: int) -> list[list[int]]:
-    """Environment indices per worker: contiguous, sizes differing by at most one."""
+def split(num_envs: int, num_workers: int) -> list[list[int]]:
+    """Environment indices per worker: contiguous, sizes differing by at most one (also Ray's rollout actors')."""
     bounds = np.linspace(0, num_envs, num_workers + 1).round().astype(int)
     return [list(range(bounds[w], bounds[w + 1])) for w in range(num_workers)]
 
@@ -147,7 +147,7 @@ class VectorEnv:
             raise ValueError(f"worker_kwargs has {len(worker_kwargs)} entries for {num_envs} environments")
         ctx = mp.get_context(start_method)
         self.num_envs, self.num_workers = num_envs, num_workers
-        self._groups = _split(num_envs, num_workers)
+        self._groups = split(num_envs, num_workers)
         self._conns, self._procs, self._blocks, self._views = [], [], [], {}
         self._closed = False
         for group in self._groups:

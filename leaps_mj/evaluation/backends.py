@@ -70,10 +70,11 @@ def worker_pool(backend: Backend, initializer, initargs: tuple, n_jobs: int):
       an object with ``imap_unordered(fn, jobs)``.
     """
     if backend.name == "ray":
+        from leaps_mj.environment import ray_cluster
         from leaps_mj.evaluation import ray_backend
 
-        with ray_backend.connected(backend.address), ray_backend.ActorPool(
-                initializer, initargs, min(backend.workers or ray_backend.cluster_cpus(), n_jobs)) as pool:
+        with ray_cluster.connected(backend.address), ray_backend.ActorPool(
+                initializer, initargs, min(backend.workers or ray_cluster.cluster_cpus(), n_jobs)) as pool:
             yield pool
         return
     pool = multiprocessing.get_context("spawn").Pool(min(backend.workers or 1, n_jobs), initializer, initargs)

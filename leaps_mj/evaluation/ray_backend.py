@@ -13,71 +13,21 @@ none counted twice. An error raised by a job itself, or by the initializer,
 is not retried: it is a bug or bad input, and is raised in the driver.
 
 Workers get the driver's MuJoCo GL settings through the actor's
-``runtime_env`` (:func:`worker_env`), so they apply before MuJoCo is imported
-there; the driver opens no GL context. See docs/ray.md for running on a
-cluster.
+``runtime_env`` (:func:`leaps_mj.environment.ray_cluster.worker_env`), so they
+apply before MuJoCo is imported there; the driver opens no GL context. See
+docs/ray.md for running on a cluster.
 """
 
 from __future__ import annotations
 
 import collections
-import contextlib
-import os
 
 import ray
 
-from leaps_mj.environment import gl_backend
+from leaps_mj.environment.ray_cluster import worker_env
 
-#: Environment variables passed from the driver to every actor when set: MuJoCo reads the GL ones at import.
-FORWARDED_ENV = ("MUJOCO_GL", "MUJOCO_EGL_DEVICE_ID", "PYOPENGL_PLATFORM", "LP_NUM_THREADS")
-
-
-def worker_env() -> dict[str, str]:
-    """The ``runtime_env`` variables of every actor: the driver's :data:`FORWARDED_ENV`.
-
-    A ``MUJOCO_GL`` of :data:`leaps_mj.environment.gl_backend.DISABLED` (the driver found no GL backend) is not
-    passed on: it says nothing of the worker nodes, which then pick their
-    own (:mod:`leaps_mj.environment.gl_backend`).
-    """
-    env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
-    if env.get("MUJOCO_GL") == gl_backend.DISABLED:
-        del env["MUJOCO_GL"]
-    return env
 #: Seconds to wait for any running job to finish before giving up (a hung worker or a cluster without room).
 JOB_TIMEOUT_S = 3600.0
-
-
-@contextlib.contextmanager
-def connected(address: str | None = None):
-    """Ray connected for the block: to the cluster at ``address``, or a new local instance sized to this machine.
-
-    An instance already initialised in this process (a test's, the caller's)
-    is used as it is and left running; one started here is shut down on exit.
-
-    Raises:
-      ValueError: if ``address`` is given while Ray is already initialised, or cannot be reached.
-    """
-    if ray.is_initialized():
-        if address is not None:
-            raise ValueError(f"ray address {address!r}: Ray is already initialised in this process")
-        yield
-        return
-    try:
-        if address is None:
-            ray.init(include_dashboard=False)
-        else:
-            ray.init(address=address)
-    except ConnectionError as e:
-        raise ValueError(f"ray address {address!r}: {e}") from e
-    try:
-        yield
-    finally:
-        ray.shutdown()
-
-
-def cluster_cpus() -> int:
-    """CPUs of the connected cluster (at least 1): the default number of actors, one per CPU."""
-    return max(1, int(ray.cluster_resources().get("CPU", 1)))
 
 
 class _Worker:
@@ -97,7 +47,7 @@ class ActorPool:
     Args:
       initializer: module-level function building a worker's state (in the actor's process).
       initargs: its arguments.
-      workers: actors (see :func:`cluster_cpus`).
+      workers: actors (see :func:`leaps_mj.environment.ray_cluster.cluster_cpus`).
       max_retries: how many times one job may lose its actor before the pool gives up.
       timeout_s: seconds to wait for some running job to finish (see :data:`JOB_TIMEOUT_S`).
 

@@ -4,7 +4,8 @@ Networks and checkpoints (:mod:`nets`), learned sub-policies μ(θ) and μ_s
 (:mod:`policies`), the CNN room-type classifier's bits (:mod:`classifier`),
 the learned baselines' agents (:mod:`baselines`: aug. μ_s and the LSTM
 controller), and the trainers behind ``python -m leaps_mj.train``:
-sub-policies (:mod:`train_policy`), classifier (:mod:`train_classifier`),
+sub-policies (:mod:`train_policy`, its rollouts in :mod:`rollouts`, on Ray
+actors in :mod:`ray_rollouts`), classifier (:mod:`train_classifier`),
 controller (:mod:`train_controller`) and the prior (:mod:`train_prior`).
 Needs torch. Imports :mod:`leaps_mj.planning` and below.
 """

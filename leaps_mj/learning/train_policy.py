@@ -25,6 +25,12 @@ segmentation + depth frames. Three methods:
   the n-step returns so that A2C fine-tuning starts with a trained critic.
 * ``dagger+a2c`` — DAgger for ``dagger_fraction`` of the steps, then A2C.
 
+Rollouts run in local worker processes (the default) or on Ray actors
+across a cluster (``--backend ray [--ray-address ADDR] [--num-workers N]``,
+:mod:`leaps_mj.learning.ray_rollouts`, docs/ray.md); both hand the same
+unrolls to the same update (:mod:`leaps_mj.learning.rollouts`). The backend is
+an option of the run, not of its configuration: a run may resume on either.
+
 Training episodes are short (``horizon`` steps) and start near the target:
 within ``start_distance`` geodesic metres, growing by ``distance_step`` every
 ``curriculum_iterations`` iterations (the paper's curriculum), with the shaped
@@ -58,72 +64,16 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from leaps_mj.environment import vector
-from leaps_mj.learning import nets, policies
+from leaps_mj.learning import nets, policies, rollouts
 from leaps_mj.learning import trainer as trainer_lib
-from leaps_mj.learning.losses import a2c_loss, aux_loss, bc_loss, masked_mean, n_step_returns
+from leaps_mj.learning.losses import a2c_loss, aux_loss, bc_loss, masked_mean
 from leaps_mj.learning.policy_config import PRESETS, TrainConfig
 from leaps_mj.learning.policy_eval import evaluate, plot_curves
-from leaps_mj.learning.training_env import training_houses, training_vector_env
+from leaps_mj.learning.rollouts import EpisodeStats, Unroll
 from leaps_mj.world import rooms
 
 #: The name of a shared run's one network (``--shared true``): ``<out>/shared.pt``.
 SHARED = policies.SHARED
-
-# -- rollouts ------------------------------------------------------------------------------------
-
-
-@dataclasses.dataclass
-class Unroll:
-    """``t_max`` steps of ``num_envs`` environments, as stored for updates.
-
-    Segmentation is uint8, depth float16 (the aggregated dataset keeps many).
-    """
-
-    obs: dict[str, np.ndarray]  # the network's inputs (T, B, ...): segmentation, depth [, semantic, target] [, node]
-    first: np.ndarray  # (T, B) float32, 1 where an episode began
-    valid: np.ndarray  # (T, B) float32, 0 at LAST observations (their action is ignored)
-    labels: np.ndarray  # (T, B) int64 expert actions (-1: none)
-    state: tuple[np.ndarray, np.ndarray]  # LSTM (h, c) at the unroll's start
-    aux: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)  # auxiliary labels (T, B, ...)
-
-    def tensors(self, device) -> tuple[dict, torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
-        obs = nets.ActorCritic.preprocess(self.obs, device)
-        first = torch.as_tensor(self.first, device=device)
-        state = tuple(torch.as_tensor(s, device=device) for s in self.state)
-        return obs, first, state
-
-    def aux_tensors(self, device) -> dict[str, torch.Tensor]:
-        return {k: torch.as_tensor(v, device=device) for k, v in self.aux.items()}
-
-
-class EpisodeStats:
-    """Outcomes of the last ``window`` episodes finished in rollouts: learner-driven or mixed."""
-
-    def __init__(self, num_envs: int, window: int = 50):
-        self.returns = np.zeros(num_envs)
-        self.recent = {"learner": collections.deque(maxlen=window), "mixed": collections.deque(maxlen=window)}
-        self.finished = 0
-
-    def record(self, i: int, ts, mixed: bool) -> None:
-        if ts.reward is not None:
-            self.returns[i] += ts.reward
-        if ts.last():
-            self.recent["mixed" if mixed else "learner"].append(
-                (float(ts.discount == 0.0), self.returns[i]))
-            self.returns[i] = 0.0
-            self.finished += 1
-
-    def summary(self) -> dict[str, float]:
-        out = {}
-        for who, items in self.recent.items():
-            if items:
-                arr = np.array(items)
-                prefix = "" if who == "learner" else "mixed_"
-                out[f"{prefix}success_rate"] = float(arr[:, 0].mean())
-                out[f"{prefix}episode_return"] = float(arr[:, 1].mean())
-        return out
-
 
 class Trainer(trainer_lib.Trainer):
     """Trains (or resumes) the policy of one target; see the module docstring.
@@ -136,6 +86,9 @@ class Trainer(trainer_lib.Trainer):
       device: Torch device of the network.
       progress: Show a tqdm progress bar.
       targets: The targets of a shared network (default: the 9 graph nodes).
+      backend: Where rollouts run, "local" or "ray" (:mod:`leaps_mj.learning.rollouts`).
+      num_workers: Ray rollout actors (default: one per cluster CPU, at most ``num_envs``).
+      ray_address: The Ray cluster's address (default: a local instance).
     """
 
     csv_fields = ("iteration", "global_step", "phase", "SPS", "beta", "start_distance", "success_rate",
@@ -149,7 +102,9 @@ class Trainer(trainer_lib.Trainer):
                            "grad_norm", "expert_agreement", "aux_loss", "aux_view_accuracy", "aux_distance_error"})
 
     def __init__(self, config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
-                 progress: bool = True, targets: Sequence[str] = rooms.GRAPH_NODES):
+                 progress: bool = True, targets: Sequence[str] = rooms.GRAPH_NODES, backend: str = "local",
+                 num_workers: int | None = None, ray_address: str | None = None):
+        rollouts.check_backend(backend, num_workers, ray_address, config.num_envs)
         if (target == SHARED) != config.shared:
             raise ValueError(f"target {target!r} with shared={config.shared}: a shared run trains target "
                              f"{SHARED!r}, a per-target run one of {list(rooms.GRAPH_NODES)}")
@@ -162,6 +117,7 @@ class Trainer(trainer_lib.Trainer):
                          progress=progress, desc=f"{target} {config.method}")
         self.target = target
         self.targets = tuple(targets) if config.shared else (target,)
+        self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         # Seeds and house shards are per network: the shared one takes the index after the nodes'.
         self.index = len(rooms.GRAPH_NODES) if config.shared else rooms.room_index(target)
         self.run_dir = pathlib.Path(out)
@@ -205,23 +161,20 @@ class Trainer(trainer_lib.Trainer):
                 "beta": f"{row['beta']:.2f}"}
 
     # -- training --------------------------------------------------------------------------
-    def _worker_kwargs(self) -> list[dict[str, Any]]:
-        c = self.config
-        shards = training_houses(c.dataset, None if c.shared else self.target, c.num_houses, c.num_envs,
-                                 self.run_dir, name=self.target)
-        return [dict(houses_dir=str(shard), width=c.width, height=c.height, horizon=c.horizon, reward="shaped",
-                     targets=self.targets, max_start_distance=c.start_distance_at(self.iteration),
-                     max_start_doors=c.max_start_doors or None)
-                for shard in shards]
-
     @contextlib.contextmanager
     def session(self):
-        """The vector environment and the carried rollout state of one ``train`` call."""
+        """The rollout backend and the episode statistics of one ``train`` call."""
         c = self.config
-        seed = (c.seed * 1000 + self.index) * 100_000 + self.iteration * c.num_envs
-        with training_vector_env(self._worker_kwargs(), seed, c, self.iteration, c.method != "a2c") as envs:
-            self._envs, self._timesteps = envs, envs.reset()
-            self._state = self.model.initial_state(c.num_envs, self.device)
+        if self.backend == "ray":
+            from leaps_mj.learning import ray_rollouts
+
+            source = ray_rollouts.RayRollouts(c, self.target, self.targets, self.index, self.iteration,
+                                              self.num_workers, self.ray_address)
+        else:
+            source = rollouts.LocalRollouts(
+                c, rollouts.env_kwargs(c, self.target, self.targets, self.iteration, self.run_dir),
+                rollouts.env_seed(c, self.index, self.iteration), self.iteration)
+        with source as self._rollouts:
             self._stats = EpisodeStats(c.num_envs)
             yield
 
@@ -229,10 +182,8 @@ class Trainer(trainer_lib.Trainer):
         c = self.config
         t0 = time.perf_counter()
         rng = np.random.default_rng([c.seed, self.index, self.iteration])
-        gen = torch.Generator(device=self.device).manual_seed(int(rng.integers(2**63)))
         beta = c.beta_at(self.iteration)
-        unroll, batch, self._timesteps, self._state, rollout_times = self._rollout(
-            self._envs, self._timesteps, self._state, beta, rng, gen, self._stats)
+        unroll, batch, rollout_times = self._rollouts.collect(self.model, self.iteration, beta, rng, self._stats)
         scalars = self._update(unroll, batch, rng)
         self.global_step += c.batch
         phase = "dagger" if self.iteration + 1 <= c.dagger_iterations and c.method != "a2c" else "a2c"
@@ -240,64 +191,9 @@ class Trainer(trainer_lib.Trainer):
                 "start_distance": c.start_distance_at(self.iteration), "SPS": c.batch / (time.perf_counter() - t0),
                 "episodes": self._stats.finished, **rollout_times}
 
-    def _rollout(self, envs, timesteps, state, beta, rng, gen, stats):
-        """Collects one unroll; returns it with the A2C batch and the carried state."""
-        c = self.config
-        T, B = c.t_max, c.num_envs
-        keys = self.model.input_keys()
-        aux_keys = ("room_view", "semantic", "target_distance") if c.aux_coef > 0 else ()
-        stored = {"segmentation": np.uint8, "depth": np.float16, "target_distance": np.float32}
-        first, valid = np.zeros((T, B), np.float32), np.zeros((T, B), np.float32)
-        labels, actions = np.zeros((T, B), np.int64), np.zeros((T, B), np.int64)
-        rewards, discounts = np.zeros((T, B)), np.zeros((T, B))
-        values, bootstrap = np.zeros((T + 1, B)), np.zeros((T, B), bool)
-        start_state = tuple(s.detach().cpu().numpy() for s in state)
-        columns: dict[str, np.ndarray] = {}
-        times = collections.Counter()
-        for t in range(T + 1):
-            obs = {k: vector.stack(timesteps, k) for k in set(keys + aux_keys + ("expert_action",))}
-            is_first = np.array([ts.first() for ts in timesteps], np.float32)
-            f0 = time.perf_counter()
-            with torch.no_grad():
-                x = nets.ActorCritic.preprocess({k: obs[k] for k in keys}, self.device)
-                logits, value, new_state = self.model(x, state, torch.as_tensor(is_first, device=self.device))
-                learner = torch.multinomial(torch.softmax(logits, -1), 1, generator=gen).squeeze(-1).cpu().numpy()
-            times["act_forward_seconds"] += self._elapsed(f0)
-            values[t] = value.cpu().numpy()
-            if t == T:
-                break
-            state = new_state
-            for k in set(keys + aux_keys):
-                if k not in columns:
-                    columns[k] = np.zeros((T, *obs[k].shape), stored.get(k, np.uint8))
-                columns[k][t] = obs[k]
-            first[t], labels[t] = is_first, obs["expert_action"]
-            valid[t] = [not ts.last() for ts in timesteps]
-            expert = (rng.random(B) < beta) & (np.arange(B) >= c.learner_envs) & (labels[t] >= 0)
-            actions[t] = np.where(expert, labels[t], learner)
-            e0 = time.perf_counter()
-            timesteps = envs.step([int(a) for a in actions[t]])
-            times["env_wait_seconds"] += time.perf_counter() - e0
-            for i, ts in enumerate(timesteps):
-                stats.record(i, ts, i >= c.learner_envs and beta > 0)
-                times["worker_physics_seconds"] += ts.observation["step_seconds"][0]
-                times["worker_render_seconds"] += ts.observation["step_seconds"][1]
-                times["worker_expert_seconds"] += ts.observation["step_seconds"][2]
-                if valid[t, i]:
-                    rewards[t, i] = ts.reward
-                    discounts[t, i] = c.gamma * ts.discount
-                bootstrap[t, i] = ts.last() or t == T - 1
-        returns = n_step_returns(rewards, discounts, values[1:], bootstrap)
-        unroll = Unroll({k: columns[k] for k in keys}, first, valid, labels, start_state,
-                        {k: columns[k] for k in aux_keys})
-        batch = {"actions": actions, "returns": returns.astype(np.float32)}
-        return unroll, batch, timesteps, state, dict(times)
-
     def _elapsed(self, since: float) -> float:
         """Seconds since ``since``, after the device's queued work is done."""
-        if self.device.type == "cuda":
-            torch.cuda.synchronize(self.device)
-        return time.perf_counter() - since
+        return rollouts.elapsed(self.device, since)
 
     def _unroll_forward(self, unroll: Unroll):
         """The network over an unroll: logits, values and, with auxiliary heads, their loss (else None)."""
@@ -365,17 +261,18 @@ class Trainer(trainer_lib.Trainer):
 
 def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
                progress: bool = True, stop_after: int | None = None,
-               targets: Sequence[str] = rooms.GRAPH_NODES) -> dict | None:
+               targets: Sequence[str] = rooms.GRAPH_NODES, **rollout_options) -> dict | None:
     """Trains one network to completion (resuming) and evaluates it once.
 
     Args:
       target: The target of a per-target run, :data:`SHARED` for a shared one.
       targets: The targets of a shared network.
+      **rollout_options: ``backend``, ``num_workers``, ``ray_address`` of :class:`Trainer`.
 
     Returns:
       The evaluation results, or None if ``stop_after`` ended the call early.
     """
-    trainer = Trainer(config, target, out, device=device, progress=progress, targets=targets)
+    trainer = Trainer(config, target, out, device=device, progress=progress, targets=targets, **rollout_options)
     trainer.train(stop_after)
     if not trainer.finished:
         return None
@@ -444,6 +341,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop each target after this many more iterations (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--backend", choices=rollouts.BACKENDS, default="local",
+                        help="where rollouts run: local worker processes, or Ray actors (docs/ray.md)")
+    parser.add_argument("--ray-address", default=None,
+                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
+    parser.add_argument("--num-workers", type=int, default=None,
+                        help="Ray rollout actors, each holding num_envs / N environments (with --backend ray; "
+                             "default: one per cluster CPU, at most num_envs)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):
         default = field.default
@@ -468,7 +372,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = {}
     for target in ((SHARED,) if config.shared else targets):
         results[target] = run_target(config, target, out, args.device, not args.no_progress, args.stop_after,
-                                     targets=targets)
+                                     targets=targets, backend=args.backend, num_workers=args.num_workers,
+                                     ray_address=args.ray_address)
     print(f"{'target':12} {'train':>8} {'valid':>8} {'valid greedy':>13}  (success on sampled episodes)")
     for target, res in results.items():
         if res is None:
