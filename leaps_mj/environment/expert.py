@@ -64,36 +64,60 @@ class GeodesicExpert:
         return self._safe[key]
 
     def field(self, target: str, view: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Steering field towards ``target`` (its viewing zone when ``view``).
+        """Steering field towards ``target``'s rooms (their viewing zones when ``view``), cached per house.
 
         Returns:
-          (distance field on the wide-clearance grid, index arrays of each
-          cell's nearest cell where that field is finite, see-object xy array).
+          :meth:`target_field` over every room of type ``target``.
         """
         hm = self.env.task.house_model
         key = (hm.house.id, target, view)
         if key not in self._fields:
-            grid = hm.grid
-            goal_rooms = {r.id for r in hm.house.rooms if r.type == target}
-            see = set(rooms.SEE_OBJECTS.get(target, ()))
-            pts = np.array([g.pos[:2] for it in hm.house.items if it.room in goal_rooms
-                            for g in it.geoms if g.cls in see]).reshape(-1, 2)
-            zone = grid.room_mask(target)
-            if view and len(pts):
-                xs, ys = grid.cell_centers()
-                near = np.zeros(grid.shape, dtype=bool)
-                for px, py in pts:
-                    near |= np.hypot(xs - px, ys - py) <= _VIEW_RADIUS
-                if (zone & near).any():
-                    zone = zone & near
-            safe = self._safe_grid(hm)
-            dist = safe.distance_from(zone)
-            if not np.isfinite(dist).any():
-                dist = grid.distance_from(zone)
-            finite = np.isfinite(dist)
-            _, nearest = scipy.ndimage.distance_transform_edt(~finite, return_indices=True)
-            self._fields[key] = (dist, nearest, pts)
+            self._fields[key] = self.target_field(target, view)
         return self._fields[key]
+
+    def target_field(self, target: str, view: bool, room_ids=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Steering field towards rooms of type ``target`` (their viewing zones when ``view``), uncached.
+
+        Args:
+          target: the room type (or ``indoor``).
+          view: steer to the part of the rooms within :data:`_VIEW_RADIUS` of
+            the type's see-objects (where there is one).
+          room_ids: the rooms of that type to steer to (default: all of them).
+
+        Returns:
+          (distance field, nearest-cell indices: see :meth:`zone_field`;
+          (n, 2) xy of the see-objects in those rooms).
+        """
+        hm = self.env.task.house_model
+        grid = hm.grid
+        goal_rooms = [r.id for r in hm.house.rooms if r.type == target and (room_ids is None or r.id in room_ids)]
+        see = set(rooms.SEE_OBJECTS.get(target, ()))
+        pts = np.array([g.pos[:2] for it in hm.house.items if it.room in goal_rooms
+                        for g in it.geoms if g.cls in see]).reshape(-1, 2)
+        zone = np.isin(grid.room_id, goal_rooms) & grid.free
+        if view and len(pts):
+            xs, ys = grid.cell_centers()
+            near = np.zeros(grid.shape, dtype=bool)
+            for px, py in pts:
+                near |= np.hypot(xs - px, ys - py) <= _VIEW_RADIUS
+            if (zone & near).any():
+                zone = zone & near
+        return (*self.zone_field(zone), pts)
+
+    def zone_field(self, zone: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Steering field towards a mask of grid cells, uncached.
+
+        Returns:
+          (geodesic metres to ``zone`` on the wide-clearance grid, or on the
+          house's grid where the wide one cannot reach it; index arrays of
+          each cell's nearest cell where that field is finite).
+        """
+        hm = self.env.task.house_model
+        dist = self._safe_grid(hm).distance_from(zone)
+        if not np.isfinite(dist).any():
+            dist = hm.grid.distance_from(zone)
+        _, nearest = scipy.ndimage.distance_transform_edt(~np.isfinite(dist), return_indices=True)
+        return dist, nearest
 
     def waypoint(self, field: np.ndarray, nearest: np.ndarray, xy) -> np.ndarray | None:
         """A point ``lookahead`` metres down ``field`` from ``xy``; None at the goal.
@@ -124,12 +148,18 @@ class GeodesicExpert:
 
     def step_towards(self, target: str, view: bool, pose) -> int | None:
         """Action that follows the field to ``target`` from ``pose``; None at its goal."""
-        task = self.env.task
         field, nearest, _ = self.field(target, view)
+        return self.follow(field, nearest, pose)
+
+    def follow(self, field: np.ndarray, nearest: np.ndarray, pose) -> int | None:
+        """Action that follows a steering field from ``pose``; None at its goal.
+
+        After a collision it makes a random unsticking move half of the time.
+        """
         wp = self.waypoint(field, nearest, pose[:2])
         if wp is None:
             return None
-        if task.collision and self.rng.random() < 0.5:
+        if self.env.task.collision and self.rng.random() < 0.5:
             return int(self.rng.choice([LEFT, RIGHT, SMALL_FORWARD]))
         err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - pose[2], 2 * math.pi)
         if abs(err) > _FACE_TOL:

@@ -180,6 +180,8 @@ class HouseModel:
       node_lut: geom id + 1 → graph node of the room the geom belongs to
         (floors, ceilings, furniture; ``len(GRAPH_NODES)`` for walls, doors
         and nothing hit): the per-pixel room labels of training's auxiliary losses.
+      room_lut: geom id + 1 → id of the room the geom belongs to (-1 for none):
+        which rooms a frame reveals, for the observable expert.
     """
 
     def __init__(self, house: houses.House, xml: str, model: mujoco.MjModel):
@@ -191,12 +193,14 @@ class HouseModel:
         # One row per graph node; the indoor row stays empty (nothing to see).
         self.see_lut = np.zeros((len(rooms.GRAPH_NODES), ngeom + 1), dtype=bool)
         self.node_lut = np.full(ngeom + 1, len(rooms.GRAPH_NODES), dtype=np.uint8)
+        self.room_lut = np.full(ngeom + 1, -1, dtype=np.int16)
         for g in range(ngeom):
             parts = model.geom(g).name.split("__")
             cls = parts[0].split("/")[-1]
             self.seg_lut[g + 1] = rooms.seg_class_index(cls)
             if len(parts) >= 3 and parts[2].startswith("r"):
                 room_type = parts[1]
+                self.room_lut[g + 1] = int(parts[2][1:])
                 if room_type in rooms.GRAPH_NODES:
                     self.node_lut[g + 1] = rooms.room_index(room_type)
                 if room_type in rooms.SEE_OBJECTS and cls in rooms.SEE_OBJECTS[room_type]:
@@ -551,9 +555,9 @@ class RoomNavEnvironment(control.Environment):
             self._physics = physics
             self.renderer = rend
             self._task.house_model = hm
-            # Segment index → class, → counts for "see" and → room node, via the scene's geoms.
+            # Segment index → class, → counts for "see", → room node and → room id, via the scene's geoms.
             geoms = rend.segment_geoms + 1
-            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms], hm.node_lut[geoms])
+            self.segment_luts = (hm.seg_lut[geoms], hm.see_lut[:, geoms], hm.node_lut[geoms], hm.room_lut[geoms])
         return physics
 
     # -- episodes --------------------------------------------------------------

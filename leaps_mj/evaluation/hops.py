@@ -9,7 +9,9 @@ neighbouring room, so its success rests on that hop. The hop episodes
 :func:`leaps_mj.environment.episodes.generate_hops`) start 1 and 2 doors from
 the nearest room of each graph node (the 8 room types and the untyped
 ``indoor`` node). Each agent runs the target's sub-policy alone (``pure``,
-:class:`leaps_mj.planning.agents.PureAgent`) or the geodesic ``oracle``;
+:class:`leaps_mj.planning.agents.PureAgent`), the geodesic ``oracle``, or the
+``observable`` expert (the teacher that chooses only from what the agent has
+seen, :class:`leaps_mj.environment.observable_expert.ObservableExpert`);
 success is the environment's own (the see test, 3 steps in a row; for
 ``indoor`` being in untyped indoor space). Each episode runs once to the
 largest horizon and success within a smaller one is derived from the success
@@ -47,7 +49,7 @@ from leaps_mj.world import rooms
 #: Step budgets reported: one LEAPS hand-over (N = 30) and two.
 HORIZONS = (30, 60)
 #: Agents of the benchmark (names of :data:`leaps_mj.evaluation.harness.AGENTS`).
-AGENTS = ("pure", "oracle", "random")
+AGENTS = ("pure", "oracle", "observable", "random")
 #: Named subsets: episodes per node and door distance (None: all).
 SUBSETS = {"full": None, "smoke": 1}
 #: The label of a run's sub-policy results, the one paired with a baseline's.

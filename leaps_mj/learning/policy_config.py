@@ -9,10 +9,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from leaps_mj.environment import expert, observable_expert
 from leaps_mj.learning import nets
 from leaps_mj.world import dataset as dataset_lib
 
 METHODS = ("a2c", "dagger", "dagger+a2c")
+#: DAgger teachers by name: the map-reading geodesic expert, or the one acting only on what was observed.
+TEACHERS = {"geodesic": expert.GeodesicExpert, "observable": observable_expert.ObservableExpert}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,6 +40,11 @@ class TrainConfig:
         where the agent stands and the geodesic distance to the target,
         labels the simulator gives for free and that only training reads.
       method: "a2c", "dagger" or "dagger+a2c".
+      teacher: Whose actions label the DAgger samples (a key of
+        :data:`TEACHERS`): "geodesic" (reads the map, so some of its choices
+        cannot be known from the frames) or "observable" (chooses from the
+        rooms seen and the doors passed so far,
+        :class:`leaps_mj.environment.observable_expert.ObservableExpert`).
       total_steps: Environment steps per target (all environments together).
       dagger_fraction: Share of the iterations spent on DAgger in "dagger+a2c".
       beta_fraction: Share of the DAgger iterations over which β, the
@@ -87,6 +95,7 @@ class TrainConfig:
     shared: bool = False
     aux_coef: float = 0.0
     method: str = "a2c"
+    teacher: str = "geodesic"
     total_steps: int = 20_000_000
     dagger_fraction: float = 0.7
     beta_fraction: float = 0.5
@@ -119,6 +128,8 @@ class TrainConfig:
         object.__setattr__(self, "conv_channels", tuple(self.conv_channels))
         if self.method not in METHODS:
             raise ValueError(f"method {self.method!r}: expected one of {list(METHODS)}")
+        if self.teacher not in TEACHERS:
+            raise ValueError(f"teacher {self.teacher!r}: expected one of {list(TEACHERS)}")
         for name in ("total_steps", "num_envs", "t_max", "horizon", "curriculum_iterations",
                      "checkpoint_every", "eval_episodes", "eval_horizon", "buffer_steps"):
             value = getattr(self, name)

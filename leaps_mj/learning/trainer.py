@@ -46,6 +46,10 @@ def plain(value: Any) -> Any:
 def check_same_config(path, saved: dict, config) -> None:
     """Refuses to resume a run under another configuration.
 
+    A field the checkpoint lacks (added to the dataclass after it was
+    written) counts as saved at its default, so runs checkpointed before a
+    new option still resume.
+
     Args:
       path: the checkpoint being resumed (named in the error).
       saved: the configuration stored in it (a dict).
@@ -54,7 +58,8 @@ def check_same_config(path, saved: dict, config) -> None:
     Raises:
       ValueError: naming every differing field with its saved and given value.
     """
-    saved, given = plain(dict(saved)), plain(dataclasses.asdict(config))
+    defaults = {f.name: f.default for f in dataclasses.fields(config) if f.default is not dataclasses.MISSING}
+    saved, given = plain({**defaults, **saved}), plain(dataclasses.asdict(config))
     diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
     if diff:
         fields = ", ".join(f"{k}: saved {a!r}, given {b!r}" for k, (a, b) in diff.items())

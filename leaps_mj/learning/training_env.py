@@ -2,8 +2,8 @@
 
 Each worker process runs a :class:`TrainingEnv`: a RoomNav environment over
 its shard of the training houses that have a room of the target type, with
-the geodesic expert's action (the DAgger label) and per-step timings added
-to the observation.
+the teacher's action (the DAgger label: the geodesic or the observable
+expert, ``TrainConfig.teacher``) and per-step timings added to the observation.
 """
 
 from __future__ import annotations
@@ -18,9 +18,8 @@ from typing import Sequence
 import numpy as np
 
 from leaps_mj.environment import roomnav, vector
-from leaps_mj.environment.expert import GeodesicExpert
 from leaps_mj.learning import nets
-from leaps_mj.learning.policy_config import TrainConfig
+from leaps_mj.learning.policy_config import TEACHERS, TrainConfig
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import houses, rooms
 
@@ -53,11 +52,11 @@ class TrainingEnv:
 
     Runs in the environment's worker process and adds to every observation:
 
-    * ``expert_action`` (int64 scalar): the geodesic expert's action for the
-      state (-1 when labelling is off), the DAgger label;
+    * ``expert_action`` (int64 scalar): the teacher's action for the state
+      (-1 when labelling is off), the DAgger label;
     * ``step_seconds`` (float64 (3,)): seconds this step spent in physics and
       collisions (``Task.before_step``), in rendering and the success test
-      (``Task.after_step``) and in the expert — for the throughput benchmark;
+      (``Task.after_step``) and in the teacher — for the throughput benchmark;
     * with ``config.shared``, ``node`` (uint8 (K + 1,)): the one-hot of the
       episode's graph node, the shared network's target input;
     * with ``config.aux_coef > 0``, the auxiliary labels: ``room_view``
@@ -78,7 +77,7 @@ class TrainingEnv:
       env: The environment (from :func:`leaps_mj.load`).
       config: The run's :class:`TrainConfig`.
       first_iteration: Training iteration at which this worker starts.
-      seed: Seed of the expert's random moves.
+      seed: Seed of the teacher's random moves.
       label: Whether to compute expert labels.
     """
 
@@ -86,7 +85,7 @@ class TrainingEnv:
         self._env = env
         self._config = config
         self._steps = first_iteration * config.t_max
-        self._expert = GeodesicExpert(env, seed=seed) if label else None
+        self._expert = TEACHERS[config.teacher](env, seed=seed) if label else None
         self._last = True
         self._times = np.zeros(3)
         task = env.task

@@ -1,4 +1,4 @@
-"""Agents for RoomNav: random, pure sub-policy, LEAPS, the oracle and the local-expert sub-policy.
+"""Agents for RoomNav: random, pure sub-policy, LEAPS, the two experts and the local-expert sub-policy.
 
 The learned baselines ("aug", "controller") live in :mod:`leaps_mj.learning.baselines`;
 :func:`leaps_mj.evaluation.registry.make_agent` builds any of them by name.
@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert
+from leaps_mj.environment import expert, observable_expert
 from leaps_mj.planning import semantic
 from leaps_mj.world import rooms
 
@@ -142,9 +142,10 @@ class OracleAgent:
     """
 
     name = "oracle"
+    expert_class = expert.GeodesicExpert
 
     def __init__(self, env, seed: int = 0):
-        self.expert = expert.GeodesicExpert(env, seed=seed)
+        self.expert = self.expert_class(env, seed=seed)
         self.target: str | None = None
 
     def reset(self, target: str) -> None:
@@ -156,6 +157,18 @@ class OracleAgent:
 
     def info(self) -> dict:
         return {"subtarget": self.target, "plan": [], "belief": None}
+
+
+class ObservableAgent(OracleAgent):
+    """The observable expert (:class:`leaps_mj.environment.observable_expert.ObservableExpert`).
+
+    It walks with the map but chooses where to go only from the rooms seen
+    and the doors passed so far: the teacher a sub-policy can imitate, and
+    what a learner of it could reach at best.
+    """
+
+    name = "observable"
+    expert_class = observable_expert.ObservableExpert
 
 
 @dataclasses.dataclass(frozen=True)
@@ -362,7 +375,7 @@ class _Walker(expert.GeodesicExpert):
             return self._fields[key]
         if self._cell_field[0] == key:
             return self._cell_field[1]
-        grid, safe = hm.grid, self._safe_grid(hm)
+        grid = hm.grid
         if isinstance(target, _Cell):
             zone = np.zeros(grid.shape, dtype=bool)
             zone[target.ij] = True
@@ -370,11 +383,7 @@ class _Walker(expert.GeodesicExpert):
             room = np.isin(grid.room_id, target.ids)
             deep = room & grid.free & (scipy.ndimage.distance_transform_edt(room) * grid.cell >= _ROOM_DEPTH)
             zone = deep if deep.any() else room & grid.free
-        dist = safe.distance_from(zone)
-        if not np.isfinite(dist).any():
-            dist = grid.distance_from(zone)
-        _, nearest = scipy.ndimage.distance_transform_edt(~np.isfinite(dist), return_indices=True)
-        value = (dist, nearest, np.zeros((0, 2)))
+        value = (*self.zone_field(zone), np.zeros((0, 2)))
         if isinstance(target, _Cell):
             self._cell_field = (key, value)
         else:
