@@ -98,6 +98,10 @@ class PolicyConfig:
       target_input: One network for every graph node: concatenate the
         node's one-hot (``node``, K + 1 floats) to the LSTM input and to the
         heads' input. Pixels only otherwise, as μ(θ) must be.
+      prev_action: Also feed the action taken at the previous step
+        (``prev_action``, an int, -1 at an episode's first step) to the LSTM
+        as a one-hot, so the policy can keep a turn going instead of
+        dithering between left and right when both look alike.
       aux: Add auxiliary heads, read only by training losses: which graph
         nodes' rooms each of :data:`VIEW_COLUMNS` vertical strips of the
         frame shows (from the frame features), the room-type bits of where
@@ -118,6 +122,7 @@ class PolicyConfig:
     max_depth: float = 10.0
     use_semantic: bool = False
     target_input: bool = False
+    prev_action: bool = False
     aux: bool = False
     num_classes: int = rooms.NUM_SEG_CLASSES
     num_actions: int = rooms.NUM_ACTIONS
@@ -128,7 +133,7 @@ class PolicyConfig:
         _check_positive_tuple("conv_channels", self.conv_channels)
         for name in ("kernel", "stride", "hidden", "lstm", "num_actions"):
             _check_positive(name, getattr(self, name))
-        for name in ("use_semantic", "target_input", "aux"):
+        for name in ("use_semantic", "target_input", "prev_action", "aux"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -264,6 +269,12 @@ def _check_frames(name: str, tensor: torch.Tensor, width: int, height: int, lead
         )
 
 
+def _check_leading(name: str, tensor: torch.Tensor, lead: tuple[int, ...]) -> None:
+    """Checks that a per-step scalar input has exactly the frames' leading dims."""
+    if tuple(tensor.shape) != lead:
+        raise ValueError(f"{name} has shape {tuple(tensor.shape)}; expected {lead}")
+
+
 def _require_keys(obs: Mapping[str, Any], keys: tuple[str, ...]) -> None:
     missing = [k for k in keys if k not in obs]
     if missing:
@@ -301,7 +312,8 @@ class ActorCritic(_Net):
             flat = self.conv(dummy).shape[1]
         self.fc = nn.Sequential(_layer_init(nn.Linear(flat, config.hidden)), nn.ReLU())
         nodes = len(rooms.GRAPH_NODES) if config.target_input else 0
-        lstm_in = config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0) + nodes
+        lstm_in = (config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0) + nodes
+                   + (config.num_actions if config.prev_action else 0))
         self.lstm = _lstm_cell(lstm_in, config.lstm)
         self.policy = _layer_init(nn.Linear(config.lstm + nodes, config.num_actions), std=0.01)
         self.value = _layer_init(nn.Linear(config.lstm + nodes, 1), std=1.0)
@@ -314,7 +326,7 @@ class ActorCritic(_Net):
         """Observation keys the network reads."""
         cfg = self.config
         return (("segmentation", "depth") + (("semantic", "target") if cfg.use_semantic else ())
-                + (("node",) if cfg.target_input else ()))
+                + (("node",) if cfg.target_input else ()) + (("prev_action",) if cfg.prev_action else ()))
 
     @staticmethod
     def preprocess(
@@ -323,8 +335,8 @@ class ActorCritic(_Net):
         """Converts numpy observations to tensors of the dtypes the net takes.
 
         Shapes are kept, so both (B, ...) and (T, B, ...) batches work. Keys
-        other than ``segmentation``, ``depth``, ``semantic``, ``target`` and
-        ``node`` are dropped.
+        other than ``segmentation``, ``depth``, ``semantic``, ``target``,
+        ``node`` and ``prev_action`` are dropped.
 
         Raises:
           ValueError: if a segmentation id is outside ``[0, NUM_SEG_CLASSES)``.
@@ -338,6 +350,8 @@ class ActorCritic(_Net):
                     f"expected [0, {rooms.NUM_SEG_CLASSES})"
                 )
             out["segmentation"] = torch.as_tensor(seg, dtype=torch.long, device=device)
+        if "prev_action" in obs:
+            out["prev_action"] = torch.as_tensor(np.asarray(obs["prev_action"]), dtype=torch.long, device=device)
         for key in ("depth", "semantic", "target", "node"):
             if key in obs:
                 out[key] = torch.as_tensor(np.asarray(obs[key]), dtype=torch.float32, device=device)
@@ -359,6 +373,11 @@ class ActorCritic(_Net):
                                                depth.reshape(-1, cfg.height, cfg.width))))
         extra = []
         for key in self.input_keys()[2:]:
+            if key == "prev_action":
+                _check_leading(key, obs[key], tuple(seg.shape[:lead]))
+                onehot = F.one_hot(obs[key].long().reshape(-1) + 1, cfg.num_actions + 1)[:, 1:]
+                extra.append(onehot.float())
+                continue
             width = len(rooms.GRAPH_NODES) if key == "node" else rooms.NUM_ROOM_TYPES
             expected = tuple(seg.shape[:lead]) + (width,)
             if tuple(obs[key].shape) != expected:

@@ -48,7 +48,8 @@ class LearnedSubPolicy:
     ``semantic`` bits and the one-hot of the target given to :meth:`reset`
     (the target they were trained for), so they act in any environment
     whatever its own target. A shared network (``target_input``) gets the
-    one-hot of the graph node given to :meth:`reset`.
+    one-hot of the graph node given to :meth:`reset`; a ``prev_action``
+    network its own previous action in this run (none after :meth:`reset`).
 
     Args:
       folder: Folder with one ``<target>.pt`` checkpoint per target, or a
@@ -122,6 +123,7 @@ class LearnedSubPolicy:
         self._target_onehot = torch.as_tensor(rooms.target_onehot(target), dtype=torch.float32)[None]
         self._node_onehot = torch.nn.functional.one_hot(torch.tensor([rooms.room_index(target)]),
                                                         len(rooms.GRAPH_NODES)).float()
+        self._prev_action = -1
 
     def _frame(self, frame) -> np.ndarray:
         """The frame at the policy's resolution (subsampled from an integer multiple)."""
@@ -154,10 +156,14 @@ class LearnedSubPolicy:
             x["target"] = self._target_onehot
         if self._net.config.target_input:
             x["node"] = self._node_onehot
+        if self._net.config.prev_action:
+            x["prev_action"] = torch.tensor([self._prev_action])
         logits, _, self._state = self._net(x, self._state)
         if self.greedy:
-            return int(logits.argmax(-1))
-        return int(torch.multinomial(torch.softmax(logits[0], -1), 1, generator=self._generator))
+            self._prev_action = int(logits.argmax(-1))
+        else:
+            self._prev_action = int(torch.multinomial(torch.softmax(logits[0], -1), 1, generator=self._generator))
+        return self._prev_action
 
 
 def checkpoint_path(folder: str | os.PathLike, target: str) -> pathlib.Path:

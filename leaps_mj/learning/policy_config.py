@@ -35,6 +35,8 @@ class TrainConfig:
         graph node's one-hot; episodes draw their target among the run's
         targets present in the house, over all the training houses) instead
         of one network per target. Written as ``shared.pt``.
+      prev_action: The network also reads the action taken at the previous
+        step (:class:`leaps_mj.learning.nets.PolicyConfig` ``prev_action``).
       aux_coef: Weight of the auxiliary losses (0: no auxiliary heads): the
         rooms each vertical strip of the frame shows, the room-type bits
         where the agent stands and the geodesic distance to the target,
@@ -93,6 +95,7 @@ class TrainConfig:
     seg_embed: int = 8
     use_semantic: bool = False
     shared: bool = False
+    prev_action: bool = False
     aux_coef: float = 0.0
     method: str = "a2c"
     teacher: str = "geodesic"
@@ -159,7 +162,7 @@ class TrainConfig:
         return nets.PolicyConfig(width=self.width, height=self.height, conv_channels=self.conv_channels,
                                  kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed,
                                  use_semantic=self.use_semantic, target_input=self.shared,
-                                 aux=self.aux_coef > 0)
+                                 prev_action=self.prev_action, aux=self.aux_coef > 0)
 
     @property
     def batch(self) -> int:

@@ -219,7 +219,7 @@ def collect(model: nets.ActorCritic, envs, timesteps: list, state: nets.State, b
     T, B = c.t_max, len(timesteps)
     keys = model.input_keys()
     aux_keys = ("room_view", "semantic", "target_distance") if c.aux_coef > 0 else ()
-    stored = {"segmentation": np.uint8, "depth": np.float16, "target_distance": np.float32}
+    stored = {"segmentation": np.uint8, "depth": np.float16, "target_distance": np.float32, "prev_action": np.int8}
     first, valid = np.zeros((T, B), np.float32), np.zeros((T, B), np.float32)
     labels, actions = np.zeros((T, B), np.int64), np.zeros((T, B), np.int64)
     rewards, discounts = np.zeros((T, B)), np.zeros((T, B))

@@ -59,6 +59,8 @@ class TrainingEnv:
       (``Task.after_step``) and in the teacher — for the throughput benchmark;
     * with ``config.shared``, ``node`` (uint8 (K + 1,)): the one-hot of the
       episode's graph node, the shared network's target input;
+    * with ``config.prev_action``, ``prev_action`` (int64): the action that
+      led to this step (-1 at an episode's first step);
     * with ``config.aux_coef > 0``, the auxiliary labels: ``room_view``
       (uint8 (K + 1, VIEW_COLUMNS)), 1 where at least
       :data:`VIEW_MIN_FRACTION` of a vertical strip of the frame shows a room
@@ -100,7 +102,7 @@ class TrainingEnv:
             return out
         return timed
 
-    def _augment(self, ts):
+    def _augment(self, ts, action: int = -1):
         self._last = ts.last()
         t0 = time.perf_counter()
         label = self._expert.act() if self._expert is not None and not ts.last() else -1
@@ -110,6 +112,8 @@ class TrainingEnv:
         task = self._env.task
         if self._config.shared:
             obs["node"] = np.eye(len(rooms.GRAPH_NODES), dtype=np.uint8)[task.target_index]
+        if self._config.prev_action:
+            obs["prev_action"] = np.int64(action)
         if self._config.aux_coef > 0:
             obs["room_view"] = room_view(self._env.segment_luts[2].take(task.segments))
             obs["target_distance"] = np.float32(task.distance)
@@ -125,7 +129,7 @@ class TrainingEnv:
         self._steps += 1
         if self._last:
             return self.reset()
-        return self._augment(self._env.step(action))
+        return self._augment(self._env.step(action), int(action))
 
     def reset_to(self, spec):
         return self._augment(self._env.reset_to(spec))
