@@ -118,6 +118,20 @@ def test_shared_network_reads_the_node_and_steps_like_its_sequence():
         small_policy().aux_outputs(out)
 
 
+def test_previous_action_input_changes_the_output_and_is_checked():
+    model = small_policy(prev_action=True)
+    obs = nets.ActorCritic.preprocess({**random_obs((2,)), "prev_action": np.array([-1, 3])})
+    assert obs["prev_action"].dtype == torch.long and model.input_keys()[-1] == "prev_action"
+    with torch.no_grad():
+        a, _, _ = model(obs, model.initial_state(2))
+        b, _, _ = model({**obs, "prev_action": torch.tensor([4, 3])}, model.initial_state(2))
+    assert not torch.allclose(a[0], b[0]) and torch.allclose(a[1], b[1])
+    with pytest.raises(ValueError, match="prev_action has shape"):
+        model({**obs, "prev_action": torch.zeros(2, 1, dtype=torch.long)}, model.initial_state(2))
+    with pytest.raises(ValueError, match="prev_action"):
+        model({k: v for k, v in obs.items() if k != "prev_action"}, model.initial_state(2))
+
+
 def test_bad_inputs_raise_value_error():
     model = small_policy()
     with pytest.raises(ValueError, match="40x30"):

@@ -261,3 +261,24 @@ def test_aux_loss_is_zero_mean_free_and_masks_invalid_steps():
     wrong["distance"][1:] = 1e3  # masked steps do not count
     loss, scalars = losses.aux_loss(wrong, labels, valid)
     assert loss.item() == pytest.approx(0.5) and scalars["aux_distance_error"] == pytest.approx(nets.AUX_DISTANCE_SCALE)
+
+
+def test_previous_action_column_is_the_action_taken_one_step_before(tiny_dataset, tmp_path):
+    """With prev_action, each step's input is the action the rollout took at the step before
+    (-1 at an episode's first step), expert or learner, and the sub-policy feeds its own."""
+    from leaps_mj.learning import policies
+
+    config = tiny(tiny_dataset, total_steps=3 * 16, method="dagger", prev_action=True, learner_envs=1)
+    trainer = train_policy.Trainer(config, "kitchen", tmp_path, progress=False)
+    seen = []
+    update = trainer._update
+    trainer._update = lambda unroll, batch, rng: (seen.append((unroll, batch)), update(unroll, batch, rng))[1]
+    trainer.train()
+    for unroll, batch in seen:
+        prev, first = unroll.obs["prev_action"].astype(int), unroll.first.astype(bool)
+        assert (prev[first] == -1).all()
+        inside = ~first[1:]
+        np.testing.assert_array_equal(prev[1:][inside], batch["actions"][:-1][inside])
+    train_policy.run_target(config, "kitchen", tmp_path, progress=False)
+    policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",))
+    assert policy.nets["kitchen"].config.prev_action
