@@ -59,6 +59,41 @@ from leaps_mj.learning.training_env import make_training_env
 FRAGMENT_TIMEOUT_S = 1800.0
 
 
+def actor_class(cls):
+    """``cls`` as a Ray actor class of this project: one CPU per actor, not restarted, the driver's GL settings."""
+    return ray.remote(cls).options(num_cpus=1, max_restarts=0, runtime_env={"env_vars": ray_cluster.worker_env()})
+
+
+def get_replacing(ref, again, actor: str, result: str, when: str, timeout_s: float, max_retries: int):
+    """``ray.get(ref)``; when its actor is lost, ``again()`` (replacing the actor, returning the new ref) is waited on.
+
+    Args:
+      ref: The call's object ref.
+      again: Replaces the lost actor and makes the same call on it; returns its ref.
+      actor, result, when: Words of the errors ("rollout actor 0", "fragment", "iteration 3").
+      timeout_s: Seconds to wait for each try.
+      max_retries: How many times the actor may be lost.
+
+    Raises:
+      RuntimeError: if the actor failed to start or was lost more than ``max_retries`` times.
+      TimeoutError: if no result came within ``timeout_s``.
+    """
+    lost = 0
+    while True:
+        try:
+            return ray.get(ref, timeout=timeout_s)
+        except ray.exceptions.GetTimeoutError:
+            raise TimeoutError(f"{actor} returned no {result} of {when} in {timeout_s} s "
+                               f"(a hung worker, or no free CPU for it)") from None
+        except ray.exceptions.RayActorError as e:
+            if e.actor_init_failed:
+                raise RuntimeError(f"{actor} failed to start: {e}") from e
+            lost += 1
+            if lost > max_retries:
+                raise RuntimeError(f"{actor} was lost {lost} times in {when}") from e
+        ref = again()
+
+
 class _Group:
     """Environments stepped one after another in this process, with the vector env's ``step`` API."""
 
@@ -149,8 +184,7 @@ class RayRollouts:
         self._stack.enter_context(ray_cluster.connected(self._address))
         try:
             workers = self._workers or min(ray_cluster.cluster_cpus(), self._args[0].num_envs)
-            self._remote = ray.remote(RolloutWorker).options(
-                num_cpus=1, max_restarts=0, runtime_env={"env_vars": ray_cluster.worker_env()})
+            self._remote = actor_class(RolloutWorker)
             self._groups = vector.split(self._args[0].num_envs, workers)
             self._actors = [self._start(a, self._first_iteration) for a in range(workers)]
         except BaseException:
@@ -181,22 +215,13 @@ class RayRollouts:
 
     def _fragment(self, actor: int, ref, weights, iteration: int, beta: float) -> rollouts.Fragment:
         """The fragment ``ref`` of actor ``actor`` will hold; a lost actor is replaced and asked again."""
-        lost = 0
-        while True:
-            try:
-                return ray.get(ref, timeout=self._timeout_s)
-            except ray.exceptions.GetTimeoutError:
-                raise TimeoutError(f"rollout actor {actor} returned no fragment of iteration {iteration} in "
-                                   f"{self._timeout_s} s (a hung worker, or no free CPU for it)") from None
-            except ray.exceptions.RayActorError as e:
-                if e.actor_init_failed:
-                    raise RuntimeError(f"rollout actor {actor} failed to start: {e}") from e
-                lost += 1
-                if lost > self._max_retries:
-                    raise RuntimeError(f"rollout actor {actor} was lost {lost} times in iteration {iteration}") from e
+        def again():
             ray.kill(self._actors[actor])
             self._actors[actor] = self._start(actor, iteration)
-            ref = self._actors[actor].collect.remote(weights, iteration, beta)
+            return self._actors[actor].collect.remote(weights, iteration, beta)
+
+        return get_replacing(ref, again, f"rollout actor {actor}", "fragment", f"iteration {iteration}",
+                             self._timeout_s, self._max_retries)
 
     def close(self) -> None:
         """Ends the actors (their CPUs are free again) and Ray, if it was started here."""

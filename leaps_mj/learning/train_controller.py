@@ -1,6 +1,7 @@
 """Trains the HRL baseline's LSTM controller with A2C over options.
 
-``python -m leaps_mj.train controller --preset tiny|cpu|paper --out DIR [--subpolicy auto|local|learned]``
+``python -m leaps_mj.train controller --preset tiny|cpu|paper --out DIR [--subpolicy auto|local|learned]
+[--backend local|ray [--ray-address ADDR] [--num-workers N]]``
 
 The controller (:class:`leaps_mj.learning.nets.ControllerNet`, LSTM 50) acts in the
 option-level problem of :class:`leaps_mj.learning.baselines.ControllerAgent`: each
@@ -27,6 +28,12 @@ update), TensorBoard events. Re-running the same command resumes from the
 last update (episode sampling continues from a fresh seeded stream, so a
 resumed run is not bit-identical to an uninterrupted one); a different
 configuration is refused.
+
+Backends (``--backend``, a run option, not part of the configuration, so a
+run may resume on the other): ``local`` plays each update's episodes one
+after another in this process; ``ray`` plays them on Ray actors
+(:mod:`leaps_mj.learning.ray_controller`, docs/ray.md), the same episodes
+(house, target, start) as ``local`` but with per-episode sampling seeds.
 """
 
 from __future__ import annotations
@@ -45,7 +52,7 @@ import torch
 import tqdm
 
 from leaps_mj.environment import episodes, roomnav
-from leaps_mj.learning import baselines, nets
+from leaps_mj.learning import baselines, nets, rollouts
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.planning import agents
 from leaps_mj.world import dataset as dataset_lib
@@ -135,6 +142,19 @@ PRESETS = {
 }
 
 
+def check_backend(backend: str, num_workers: int | None, ray_address: str | None, batch_episodes: int) -> None:
+    """Refuses backend options that do not fit together (each Ray actor plays at least one episode per update).
+
+    Raises:
+      ValueError: naming the bad value and what was expected.
+    """
+    if backend == "ray" and num_workers is not None and (
+            isinstance(num_workers, bool) or not isinstance(num_workers, int)
+            or not 1 <= num_workers <= batch_episodes):
+        raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, batch_episodes={batch_episodes}]")
+    rollouts.check_backend(backend, num_workers, ray_address, batch_episodes)
+
+
 def resolve_subpolicy(choice: str) -> str:
     """"auto" -> "learned" when the shipped sub-policies load, else "local" (saying why on stderr)."""
     if choice not in SUBPOLICIES:
@@ -222,12 +242,24 @@ def a2c_loss(net: nets.ControllerNet, batch: list[dict], config: TrainConfig) ->
 
 
 class Trainer(trainer_lib.Trainer):
-    """Trains (or resumes) a controller run in ``out``; see the module docstring."""
+    """Trains (or resumes) a controller run in ``out``; see the module docstring.
+
+    Args:
+      config: The run's configuration.
+      out: Its folder.
+      progress: Show progress bars.
+      backend: Where the training episodes run, "local" or "ray".
+      num_workers: Ray actors (default: one per cluster CPU, at most ``batch_episodes``).
+      ray_address: The Ray cluster's address (default: a local instance).
+    """
 
     unit = "update"
     loss_keys = frozenset({"policy_loss", "value_loss", "entropy"})
 
-    def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True):
+    def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True, backend: str = "local",
+                 num_workers: int | None = None, ray_address: str | None = None):
+        check_backend(backend, num_workers, ray_address, config.batch_episodes)
+        self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         super().__init__(config, out, config.updates, progress=progress, desc="controller updates")
         self.policy_path = self.out / "controller.pt"
         torch.manual_seed(config.seed)
@@ -263,8 +295,15 @@ class Trainer(trainer_lib.Trainer):
 
     @contextlib.contextmanager
     def session(self):
-        """The training environment of one ``train`` call."""
+        """The training environment (or the Ray actors) of one ``train`` call."""
         c = self.config
+        if self.backend == "ray":
+            from leaps_mj.learning import ray_controller
+
+            with ray_controller.RayController(c, run_training_episode, make_subpolicy, self.update,
+                                              self.num_workers, self.ray_address) as self._ray:
+                yield
+            return
         self._env = roomnav.load(c.dataset, "train", seed=self._seed(1, self.update), width=c.width,
                                  height=c.height, horizon=c.horizon, reward="sparse")
         try:
@@ -272,13 +311,20 @@ class Trainer(trainer_lib.Trainer):
         finally:
             self._env.close()
 
-    def iterate(self) -> dict:
+    def play(self) -> list[dict]:
+        """The records of this update's ``batch_episodes`` training episodes, played on the run's backend."""
         c = self.config
-        t0 = time.perf_counter()
+        if self.backend == "ray":
+            return self._ray.play(self.net, self.update)
         # A fresh sub-policy per update: the local expert caches distance fields per house.
         sub = make_subpolicy(c.subpolicy, self._env, self._seed(2, self.update))
         agent = baselines.ControllerAgent(sub, self.net, c.option_steps, seed=self._seed(3, self.update))
-        batch = [run_training_episode(self._env, agent, c) for _ in range(c.batch_episodes)]
+        return [run_training_episode(self._env, agent, c) for _ in range(c.batch_episodes)]
+
+    def iterate(self) -> dict:
+        c = self.config
+        t0 = time.perf_counter()
+        batch = self.play()
         self.net.train()
         loss, scalars = a2c_loss(self.net, batch, c)
         self.optimizer.zero_grad()
@@ -330,6 +376,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more updates (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--backend", choices=rollouts.BACKENDS, default="local",
+                        help="where training episodes run: this process, or Ray actors (docs/ray.md)")
+    parser.add_argument("--ray-address", default=None,
+                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
+    parser.add_argument("--num-workers", type=int, default=None,
+                        help="Ray actors, each playing batch_episodes / N episodes per update (with --backend ray; "
+                             "default: one per cluster CPU, at most batch_episodes)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):
         if field.name != "subpolicy":
@@ -349,7 +402,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         overrides.update(width=shipped.width, height=shipped.height)
     config = dataclasses.replace(PRESETS[args.preset], subpolicy=subpolicy, **overrides)
     torch.set_num_threads(args.threads)
-    trainer = Trainer(config, args.out, progress=not args.no_progress)
+    trainer = Trainer(config, args.out, progress=not args.no_progress, backend=args.backend,
+                      num_workers=args.num_workers, ray_address=args.ray_address)
     trainer.train(args.stop_after)
     if not trainer.finished:
         print(f"stopped after update {trainer.update} of {config.updates}; rerun the same command to resume")
