@@ -1,6 +1,6 @@
-"""Trains the per-target sub-policies μ(θ): DAgger warm start, A2C, or both.
+"""Trains the sub-policies μ(θ), one network per target or one shared: DAgger warm start, A2C, or both.
 
-``python -m leaps_mj.train policy --target kitchen|...|all --preset tiny|cpu|paper --out DIR``
+``python -m leaps_mj.train policy --target kitchen|...|all --preset tiny|cpu|hop|paper --out DIR``
 
 With ``--use-semantic true`` the same recipe trains the semantic-augmented
 policy μ_s of the paper's baselines: the network also reads the room-type
@@ -8,15 +8,21 @@ bits and the target one-hot (``leaps_mj.learning.policies.load_augmented``).
 
 One :class:`~leaps_mj.learning.nets.ActorCritic` per target — the 8 room types and
 the untyped ``indoor`` node (hallways, for LEAPS's hallway hops) — on
-segmentation + depth frames. Three methods:
+segmentation + depth frames, or with ``--shared true`` one network for all
+the targets that reads the node's one-hot (``<out>/shared.pt``). Options of
+the network and its losses: ``--aux-coef`` (auxiliary heads on free
+simulator labels), ``--prev-action true`` (the previous action as input).
+Three methods:
 
 * ``a2c`` — the paper's synchronous advantage actor-critic: ``t_max``-step
   unrolls of ``num_envs`` environments in worker processes, n-step returns
   with γ = 0.97, entropy bonus 0.1, logits L2 0.01, advantage normalisation,
   Adam (lr 1e-3, weight decay 1e-5), gradient clipping at 1.
-* ``dagger`` — imitation of :class:`leaps_mj.environment.expert.GeodesicExpert` with
-  DAgger: the expert labels every state the rollouts visit (it runs in the
-  worker, next to its environment). The first ``learner_envs`` environments
+* ``dagger`` — imitation of a teacher with DAgger (``--teacher``:
+  :class:`leaps_mj.environment.expert.GeodesicExpert`, or
+  :class:`leaps_mj.environment.observable_expert.ObservableExpert`, which acts
+  only on what the agent has seen): the teacher labels every state the
+  rollouts visit (it runs in the worker, next to its environment). The first ``learner_envs`` environments
   are always driven by the learner (on-policy data, and the success curve);
   in the others each step's action is the expert's with probability β
   (decaying linearly from 1 to ``beta_min``), else the learner's. The policy
