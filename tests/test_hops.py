@@ -152,3 +152,22 @@ def test_a_partial_checkpoint_folder_runs_on_its_nodes(hop_dataset, tmp_path, ca
                  "--nodes", "kitchen") == 0
     rows = harness.read_rows(harness.csv_path(tmp_path / "kitchen", "pure"))
     assert rows and {r["target"] for r in rows} == {"kitchen"}
+
+
+def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys):
+    """tools/hop_actions.py: the observable teacher rarely reverses a turn; bad counts are refused."""
+    dataset = hop_dataset[0]
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "tools" / "hop_actions.py"
+    spec = importlib.util.spec_from_file_location("hop_actions", path)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    assert tool.main(["--dataset", str(dataset), "--agent", "observable", "--every", "1", "--limit", "4"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("4 one-door hop episodes") and "action shares:" in out
+    reversed_, turns = (int(v) for v in out.split("turn reversals ")[1].split(" consecutive")[0].split(" of "))
+    assert turns == 0 or reversed_ / turns < 0.25
+    with pytest.raises(SystemExit):
+        tool.main(["--dataset", str(dataset), "--every", "0"])
