@@ -46,14 +46,12 @@ it its configuration (``TrainConfig``), episode function and sub-policy factory.
 
 from __future__ import annotations
 
-import contextlib
 from typing import Callable, Sequence
 
 import numpy as np
-import ray
 import torch
 
-from leaps_mj.environment import ray_cluster, roomnav, vector
+from leaps_mj.environment import roomnav
 from leaps_mj.learning import baselines, nets, ray_rollouts
 
 #: Seconds the learner waits for one actor's episodes (its first call includes the actor's start-up).
@@ -125,7 +123,7 @@ class ControllerWorker:
         self.env.close()
 
 
-class RayController:
+class RayController(ray_rollouts.ActorGroup):
     """The Ray backend of the controller trainer: actors playing each update's episodes.
 
     Connects to Ray on entering (:func:`leaps_mj.environment.ray_cluster.connected`) and ends its actors on exit.
@@ -140,32 +138,19 @@ class RayController:
       timeout_s: Seconds to wait for one actor's episodes (None: :data:`EPISODES_TIMEOUT_S`, read then).
     """
 
+    noun = "controller actor"
+
     def __init__(self, config, run_episode: Callable, make_subpolicy: Callable, first_update: int,
                  workers: int | None = None, address: str | None = None, max_retries: int = 3,
                  timeout_s: float | None = None):
+        super().__init__(ControllerWorker, config.batch_episodes, workers, address, max_retries,
+                         timeout_s or EPISODES_TIMEOUT_S)
         self._worker_args = (config, run_episode, make_subpolicy)
-        self.config, self._workers, self._address = config, workers, address
+        self.config = config
         self._state = sampler_state(config, first_update)
-        self._max_retries, self._timeout_s = max_retries, timeout_s or EPISODES_TIMEOUT_S
-        self._stack = contextlib.ExitStack()
-        self._actors: list = []
 
-    @property
-    def actors(self) -> list:
-        """The live actors' handles, in episode order (a copy)."""
-        return list(self._actors)
-
-    def __enter__(self):
-        self._stack.enter_context(ray_cluster.connected(self._address))
-        try:
-            workers = self._workers or min(ray_cluster.cluster_cpus(), self.config.batch_episodes)
-            self._remote = ray_rollouts.actor_class(ControllerWorker)
-            self._groups = vector.split(self.config.batch_episodes, workers)
-            self._actors = [self._remote.remote(*self._worker_args) for _ in range(workers)]
-        except BaseException:
-            self._stack.close()
-            raise
-        return self
+    def _start(self, actor: int):
+        return self._remote.remote(*self._worker_args)
 
     def play(self, net: nets.ControllerNet, update: int) -> list[dict]:
         """The records of update ``update``'s episodes, in order, played with ``net``'s weights; replaces lost actors.
@@ -174,30 +159,11 @@ class RayController:
           RuntimeError: if an actor failed to start or was lost more than ``max_retries`` times.
           TimeoutError: if an actor returned no episodes within ``timeout_s``.
         """
-        weights = ray.put({k: v.detach().cpu() for k, v in net.state_dict().items()})
+        weights = self.put_weights(net)
         state = self._state
-        refs = [actor.play.remote(weights, update, state, self._groups[a]) for a, actor in enumerate(self._actors)]
-        results = [self._episodes(a, ref, weights, update, state) for a, ref in enumerate(refs)]
+        results = self.gather(lambda a, actor: actor.play.remote(weights, update, state, self._groups[a]),
+                              "episodes", f"update {update}")
         self._state = results[0][1]
         # Writable copies: arrays from the object store are read-only.
         return [{k: np.array(v) if isinstance(v, np.ndarray) else v for k, v in record.items()}
                 for records, _ in results for record in records]
-
-    def _episodes(self, actor: int, ref, weights, update: int, state: tuple) -> tuple[list[dict], tuple]:
-        def again():
-            ray.kill(self._actors[actor])
-            self._actors[actor] = self._remote.remote(*self._worker_args)
-            return self._actors[actor].play.remote(weights, update, state, self._groups[actor])
-
-        return ray_rollouts.get_replacing(ref, again, f"controller actor {actor}", "episodes", f"update {update}",
-                                          self._timeout_s, self._max_retries)
-
-    def close(self) -> None:
-        """Ends the actors (their CPUs are free again) and Ray, if it was started here."""
-        for actor in self._actors:
-            ray.kill(actor)
-        self._actors = []
-        self._stack.close()
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -145,7 +145,91 @@ class RolloutWorker:
         return fragment
 
 
-class RayRollouts:
+class ActorGroup:
+    """A group of project actors, each serving a contiguous share of ``items`` (environments, episodes).
+
+    The life both Ray training backends share: connect to Ray on entering
+    (:func:`leaps_mj.environment.ray_cluster.connected`), start one actor per
+    share, put the learner's weights in the object store once per round,
+    gather every actor's result in actor order, replacing a lost actor and
+    asking it again (:func:`get_replacing`), and end the actors (and Ray, if
+    started here) on exit. Subclasses say how an actor starts (:meth:`_start`).
+
+    Args:
+      worker_cls: The plain class each actor runs (:func:`actor_class`).
+      items: How many items the actors share.
+      workers: Actors (None: one per CPU of the cluster, at most ``items``).
+      address: The Ray cluster's address (None: a local instance, or the one already initialised).
+      max_retries: How many times one actor may be lost in one round before training stops.
+      timeout_s: Seconds to wait for one actor's result.
+    """
+
+    #: The actors' name in error messages.
+    noun = "actor"
+
+    def __init__(self, worker_cls, items: int, workers: int | None, address: str | None, max_retries: int,
+                 timeout_s: float):
+        self._worker_cls, self._items, self._workers, self._address = worker_cls, items, workers, address
+        self._max_retries, self._timeout_s = max_retries, timeout_s
+        self._stack = contextlib.ExitStack()
+        self._actors: list = []
+
+    @property
+    def actors(self) -> list:
+        """The live actors' handles, in item order (a copy)."""
+        return list(self._actors)
+
+    def __enter__(self):
+        self._stack.enter_context(ray_cluster.connected(self._address))
+        try:
+            workers = self._workers or min(ray_cluster.cluster_cpus(), self._items)
+            self._remote = actor_class(self._worker_cls)
+            self._groups = vector.split(self._items, workers)
+            self._actors = [self._start(a) for a in range(workers)]
+        except BaseException:
+            self._stack.close()
+            raise
+        return self
+
+    def _start(self, actor: int):
+        """A new actor ``actor`` (its handle)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def put_weights(module: torch.nn.Module):
+        """The module's weights, on the CPU, in the object store (one copy for every actor)."""
+        return ray.put({k: v.detach().cpu() for k, v in module.state_dict().items()})
+
+    def gather(self, call, result: str, when: str) -> list:
+        """``call(a, actor)`` (an actor method's ref) on every actor, then each result in actor order.
+
+        Raises:
+          RuntimeError: if an actor failed to start or was lost more than ``max_retries`` times.
+          TimeoutError: if an actor returned nothing within ``timeout_s``.
+        """
+        refs = [call(a, actor) for a, actor in enumerate(self._actors)]
+        return [self._get(a, ref, call, result, when) for a, ref in enumerate(refs)]
+
+    def _get(self, actor: int, ref, call, result: str, when: str):
+        def again():
+            ray.kill(self._actors[actor])
+            self._actors[actor] = self._start(actor)
+            return call(actor, self._actors[actor])
+
+        return get_replacing(ref, again, f"{self.noun} {actor}", result, when, self._timeout_s, self._max_retries)
+
+    def close(self) -> None:
+        """Ends the actors (their CPUs are free again) and Ray, if it was started here."""
+        for actor in self._actors:
+            ray.kill(actor)
+        self._actors = []
+        self._stack.close()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class RayRollouts(ActorGroup):
     """The Ray backend: rollout actors feeding the learner the same unrolls as :class:`rollouts.LocalRollouts`.
 
     Connects to Ray on entering (:func:`leaps_mj.environment.ray_cluster.connected`)
@@ -165,35 +249,20 @@ class RayRollouts:
       timeout_s: Seconds to wait for one actor's fragment (None: :data:`FRAGMENT_TIMEOUT_S`, read then).
     """
 
+    noun = "rollout actor"
+
     def __init__(self, config: TrainConfig, target: str, targets: Sequence[str], network: int,
                  first_iteration: int, workers: int | None = None, address: str | None = None,
                  max_retries: int = 3, timeout_s: float | None = None):
         rollouts.check_backend("ray", workers, address, config.num_envs)
+        super().__init__(RolloutWorker, config.num_envs, workers, address, max_retries,
+                         timeout_s or FRAGMENT_TIMEOUT_S)
         self._args = (config, target, tuple(targets), network)
-        self._first_iteration, self._workers, self._address = first_iteration, workers, address
-        self._max_retries, self._timeout_s = max_retries, timeout_s or FRAGMENT_TIMEOUT_S
-        self._stack = contextlib.ExitStack()
-        self._actors: list = []
+        # The iteration an actor started now begins at (seeds, curriculum): the session's first, then the current.
+        self._iteration = first_iteration
 
-    @property
-    def actors(self) -> list:
-        """The live actors' handles, in environment order (a copy)."""
-        return list(self._actors)
-
-    def __enter__(self):
-        self._stack.enter_context(ray_cluster.connected(self._address))
-        try:
-            workers = self._workers or min(ray_cluster.cluster_cpus(), self._args[0].num_envs)
-            self._remote = actor_class(RolloutWorker)
-            self._groups = vector.split(self._args[0].num_envs, workers)
-            self._actors = [self._start(a, self._first_iteration) for a in range(workers)]
-        except BaseException:
-            self._stack.close()
-            raise
-        return self
-
-    def _start(self, actor: int, iteration: int):
-        return self._remote.remote(*self._args, actor, self._groups[actor], iteration)
+    def _start(self, actor: int):
+        return self._remote.remote(*self._args, actor, self._groups[actor], self._iteration)
 
     def collect(self, model: nets.ActorCritic, iteration: int, beta: float, rng: np.random.Generator,
                 stats: rollouts.EpisodeStats) -> tuple[rollouts.Unroll, dict[str, np.ndarray], dict[str, float]]:
@@ -205,30 +274,11 @@ class RayRollouts:
           RuntimeError: if an actor failed to start or was lost more than ``max_retries`` times.
           TimeoutError: if an actor returned no fragment within ``timeout_s``.
         """
-        weights = ray.put({k: v.detach().cpu() for k, v in model.state_dict().items()})
-        pending = [actor.collect.remote(weights, iteration, beta) for actor in self._actors]
-        fragments = [self._fragment(a, ref, weights, iteration, beta) for a, ref in enumerate(pending)]
+        self._iteration = iteration
+        weights = self.put_weights(model)
+        fragments = self.gather(lambda a, actor: actor.collect.remote(weights, iteration, beta), "fragment",
+                                f"iteration {iteration}")
         for fragment in fragments:
             for episode in fragment.episodes:
                 stats.add(*episode)
         return rollouts.merge(fragments)
-
-    def _fragment(self, actor: int, ref, weights, iteration: int, beta: float) -> rollouts.Fragment:
-        """The fragment ``ref`` of actor ``actor`` will hold; a lost actor is replaced and asked again."""
-        def again():
-            ray.kill(self._actors[actor])
-            self._actors[actor] = self._start(actor, iteration)
-            return self._actors[actor].collect.remote(weights, iteration, beta)
-
-        return get_replacing(ref, again, f"rollout actor {actor}", "fragment", f"iteration {iteration}",
-                             self._timeout_s, self._max_retries)
-
-    def close(self) -> None:
-        """Ends the actors (their CPUs are free again) and Ray, if it was started here."""
-        for actor in self._actors:
-            ray.kill(actor)
-        self._actors = []
-        self._stack.close()
-
-    def __exit__(self, *exc) -> None:
-        self.close()
