@@ -27,3 +27,23 @@ def ray_local():
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     ray.shutdown()
+
+
+@pytest.fixture
+def ray_two_nodes():
+    """A simulated two-node Ray cluster (one CPU per node), connected for one test and shut down after it."""
+    ray = pytest.importorskip("ray")
+    from ray.cluster_utils import Cluster
+
+    if ray.is_initialized():  # a module's local instance, when it ran first in this process
+        ray.shutdown()
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        cluster.add_node(num_cpus=1)
+        ray.init(address=cluster.address, log_to_driver=False)
+        cluster.wait_for_nodes(timeout=120)
+        assert len([n for n in ray.nodes() if n["Alive"]]) == 2
+        yield cluster
+    finally:
+        ray.shutdown()
+        cluster.shutdown()

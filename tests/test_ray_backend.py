@@ -16,7 +16,6 @@ import pytest
 ray = pytest.importorskip("ray")
 
 from ray import cloudpickle
-from ray.cluster_utils import Cluster
 
 from leaps_mj.environment import ray_cluster
 from leaps_mj.evaluation import harness, ray_backend
@@ -106,23 +105,12 @@ def test_ray_address_while_ray_is_running_is_refused(ray_local):
 
 
 @pytest.mark.slow
-def test_two_node_cluster_gives_the_local_bytes(tiny_dataset, tmp_path):
+def test_two_node_cluster_gives_the_local_bytes(tiny_dataset, tmp_path, ray_two_nodes):
     config = harness.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
     local = _local_csvs(config, [0, 1, 2], tmp_path / "local")
-    if ray.is_initialized():  # the module's local instance, when it ran first in this process
-        ray.shutdown()
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
-    try:
-        cluster.add_node(num_cpus=1)
-        ray.init(address=cluster.address, log_to_driver=False)
-        cluster.wait_for_nodes(timeout=TIMEOUT_S)
-        assert len([n for n in ray.nodes() if n["Alive"]]) == 2
-        harness.run(config, AGENTS, [0, 1, 2], tmp_path / "ray", workers=None, chunk=1, progress=False,
-                    backend="ray")  # one actor per cluster CPU: one on each node
-        assert {s.label: harness.csv_path(tmp_path / "ray", s.label).read_bytes() for s in AGENTS} == local
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
+    harness.run(config, AGENTS, [0, 1, 2], tmp_path / "ray", workers=None, chunk=1, progress=False,
+                backend="ray")  # one actor per cluster CPU: one on each node
+    assert {s.label: harness.csv_path(tmp_path / "ray", s.label).read_bytes() for s in AGENTS} == local
 
 
 def test_workers_get_the_drivers_gl_settings_but_not_a_disabled_backend(monkeypatch):

@@ -16,7 +16,6 @@ import torch
 
 ray = pytest.importorskip("ray")
 
-from ray.cluster_utils import Cluster
 
 from leaps_mj.learning import nets, policy_eval, ray_rollouts, rollouts, train_policy, trainer
 from leaps_mj.world import rooms
@@ -174,25 +173,14 @@ def test_the_same_seed_and_actors_give_the_same_run(ray_local, tiny_dataset, tmp
 
 
 @pytest.mark.slow
-def test_two_node_cluster_trains_with_an_actor_per_node(tiny_dataset, tmp_path, monkeypatch):
+def test_two_node_cluster_trains_with_an_actor_per_node(tiny_dataset, tmp_path, monkeypatch, ray_two_nodes):
     monkeypatch.setattr(ray_rollouts, "FRAGMENT_TIMEOUT_S", TIMEOUT_S)
-    if ray.is_initialized():  # the module's local instance, when it ran first in this process
-        ray.shutdown()
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
-    try:
-        cluster.add_node(num_cpus=1)
-        ray.init(address=cluster.address, log_to_driver=False)
-        cluster.wait_for_nodes(timeout=TIMEOUT_S)
-        assert len([n for n in ray.nodes() if n["Alive"]]) == 2
-        # One actor per cluster CPU by default; each reserves the one CPU of its node.
-        run = train_policy.Trainer(tiny(tiny_dataset, total_steps=3 * 16), "kitchen", tmp_path, progress=False,
-                                   backend="ray")
-        workers, iterate = [], run.iterate
-        run.iterate = lambda: (workers.append(len(run._rollouts.actors)), iterate())[1]
-        run.train()
-        assert run.finished and workers == [2, 2, 2]
-        log = policy_eval.read_progress(tmp_path / "kitchen" / "progress.csv")
-        assert list(log["iteration"]) == [1, 2, 3] and np.isfinite(log["value_loss"]).all()
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
+    # One actor per cluster CPU by default; each reserves the one CPU of its node.
+    run = train_policy.Trainer(tiny(tiny_dataset, total_steps=3 * 16), "kitchen", tmp_path, progress=False,
+                               backend="ray")
+    workers, iterate = [], run.iterate
+    run.iterate = lambda: (workers.append(len(run._rollouts.actors)), iterate())[1]
+    run.train()
+    assert run.finished and workers == [2, 2, 2]
+    log = policy_eval.read_progress(tmp_path / "kitchen" / "progress.csv")
+    assert list(log["iteration"]) == [1, 2, 3] and np.isfinite(log["value_loss"]).all()

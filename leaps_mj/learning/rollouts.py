@@ -44,14 +44,17 @@ from leaps_mj.learning.training_env import training_houses, training_vector_env
 BACKENDS = ("local", "ray")
 
 
-def check_backend(backend: str, num_workers: int | None, ray_address: str | None, num_envs: int) -> None:
+def check_backend(backend: str, num_workers: int | None, ray_address: str | None, num_envs: int,
+                  items: str = "num_envs") -> None:
     """Refuses rollout options that do not fit together.
 
     Args:
       backend: One of :data:`BACKENDS`.
       num_workers: Ray rollout actors (None: one per cluster CPU); only with "ray".
       ray_address: Address of a running Ray cluster (None: start a local one); only with "ray".
-      num_envs: The run's environments (each actor holds at least one).
+      num_envs: How many items the actors share, each holding at least one (the run's
+        environments; the controller trainer's episodes per update).
+      items: Their name in the error.
 
     Raises:
       ValueError: naming the bad value and what was expected.
@@ -64,7 +67,7 @@ def check_backend(backend: str, num_workers: int | None, ray_address: str | None
                 raise ValueError(f"{name} {value!r} needs backend 'ray', not {backend!r}")
     if num_workers is not None and (isinstance(num_workers, bool) or not isinstance(num_workers, int)
                                     or not 1 <= num_workers <= num_envs):
-        raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, num_envs={num_envs}]")
+        raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, {items}={num_envs}]")
 
 
 @dataclasses.dataclass

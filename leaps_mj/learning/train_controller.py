@@ -142,19 +142,6 @@ PRESETS = {
 }
 
 
-def check_backend(backend: str, num_workers: int | None, ray_address: str | None, batch_episodes: int) -> None:
-    """Refuses backend options that do not fit together (each Ray actor plays at least one episode per update).
-
-    Raises:
-      ValueError: naming the bad value and what was expected.
-    """
-    if backend == "ray" and num_workers is not None and (
-            isinstance(num_workers, bool) or not isinstance(num_workers, int)
-            or not 1 <= num_workers <= batch_episodes):
-        raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, batch_episodes={batch_episodes}]")
-    rollouts.check_backend(backend, num_workers, ray_address, batch_episodes)
-
-
 def resolve_subpolicy(choice: str) -> str:
     """"auto" -> "learned" when the shipped sub-policies load, else "local" (saying why on stderr)."""
     if choice not in SUBPOLICIES:
@@ -258,7 +245,8 @@ class Trainer(trainer_lib.Trainer):
 
     def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True, backend: str = "local",
                  num_workers: int | None = None, ray_address: str | None = None):
-        check_backend(backend, num_workers, ray_address, config.batch_episodes)
+        # Each Ray actor plays at least one episode per update.
+        rollouts.check_backend(backend, num_workers, ray_address, config.batch_episodes, "batch_episodes")
         self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         super().__init__(config, out, config.updates, progress=progress, desc="controller updates")
         self.policy_path = self.out / "controller.pt"
