@@ -150,6 +150,25 @@ def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
     assert (out / "training_curves.png").stat().st_size > 0
 
 
+def test_init_from_starts_a_new_run_from_another_runs_weights(resumed_run, tmp_path):
+    """A new run (e.g. A2C fine-tuning) starts from the given policy's weights; a resume keeps its own."""
+    config, out, _, _ = resumed_run
+    shipped, _, _ = nets.load_policy(out / "kitchen.pt")
+    fine = dataclasses.replace(config, method="a2c", init_from=str(out / "kitchen.pt"), lr=1e-4)
+    trainer = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
+    assert all(torch.equal(a, b) for a, b in zip(shipped.state_dict().values(), trainer.model.state_dict().values()))
+    trainer.train(1)
+    resumed = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
+    assert resumed.iteration == 1
+    assert any(not torch.equal(a, b) for a, b in zip(shipped.state_dict().values(),
+                                                     resumed.model.state_dict().values())), "resumed, not re-initialised"
+    with pytest.raises(ValueError, match="expected this run's"):
+        train_policy.Trainer(dataclasses.replace(fine, lstm=8), "kitchen", tmp_path / "other", progress=False)
+    with pytest.raises(ValueError, match="does not exist"):
+        train_policy.Trainer(dataclasses.replace(fine, init_from=str(tmp_path / "none.pt")), "kitchen",
+                             tmp_path / "third", progress=False)
+
+
 def test_mu_s_training_stores_and_feeds_the_bits(tiny_dataset, tmp_path):
     """A tiny μ_s run: unrolls carry bits and target, both phases train, the result loads as μ_s."""
     from leaps_mj.learning import policies

@@ -42,6 +42,11 @@ class TrainConfig:
         where the agent stands and the geodesic distance to the target,
         labels the simulator gives for free and that only training reads.
       method: "a2c", "dagger" or "dagger+a2c".
+      init_from: A policy checkpoint (``<target>.pt`` or ``shared.pt`` of
+        another run, same network) whose weights start the run instead of a
+        random initialisation: to fine-tune a DAgger-trained network with
+        A2C, where the learner's own reward teaches it to commit instead of
+        dithering between turns it cannot tell apart. Empty: none.
       teacher: Whose actions label the DAgger samples (a key of
         :data:`TEACHERS`): "geodesic" (reads the map, so some of its choices
         cannot be known from the frames) or "observable" (chooses from the
@@ -98,6 +103,7 @@ class TrainConfig:
     prev_action: bool = False
     aux_coef: float = 0.0
     method: str = "a2c"
+    init_from: str = ""
     teacher: str = "geodesic"
     total_steps: int = 20_000_000
     dagger_fraction: float = 0.7

@@ -134,10 +134,22 @@ class Trainer(trainer_lib.Trainer):
         torch.manual_seed(config.seed * 1000 + self.index)
         self.model = nets.ActorCritic(config.policy_config())
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-        self.resume(config.width, config.height)
+        if not self.resume(config.width, config.height) and config.init_from:
+            self._warm_start(config.init_from)
         self.model.to(self.device).train()
         self.buffer: collections.deque[Unroll] = collections.deque(
             maxlen=max(1, config.buffer_steps // config.batch))
+
+    def _warm_start(self, path: str) -> None:
+        """Starts a new run from the weights of the policy checkpoint ``path`` (``config.init_from``).
+
+        Raises:
+          ValueError: naming the file, if it is not a policy checkpoint of this run's network.
+        """
+        model, config, _ = nets.load_policy(path, self.config.width, self.config.height)
+        if config != self.model.config:
+            raise ValueError(f"init_from {path}: holds a network {config}, expected this run's {self.model.config}")
+        self.model.load_state_dict(model.state_dict())
 
     # -- what the skeleton checkpoints and ships -----------------------------------------------
     def state(self) -> dict[str, Any]:
