@@ -71,6 +71,11 @@ class TrainConfig:
       lr: Adam learning rate.
       weight_decay: Adam weight decay.
       entropy: Entropy bonus coefficient (A2C).
+      bc_coef: Weight of an imitation loss kept in the A2C phase: the
+        cross-entropy to the teacher's labels of the learner's own states,
+        anchoring the policy gradient near the imitated policy (a policy
+        fine-tuned by A2C alone from a DAgger start collapsed within 30 k
+        samples to turning on the spot). 0: pure A2C, no labels.
       value_coef: Value-loss coefficient.
       logits_l2: Coefficient of the mean squared logits penalty.
       max_grad_norm: Gradient clipping norm.
@@ -118,6 +123,7 @@ class TrainConfig:
     lr: float = 1e-3
     weight_decay: float = 1e-5
     entropy: float = 0.1
+    bc_coef: float = 0.0
     value_coef: float = 0.5
     logits_l2: float = 0.01
     max_grad_norm: float = 1.0
@@ -154,7 +160,8 @@ class TrainConfig:
         for name in ("lr", "start_distance", "max_distance", "max_grad_norm"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
-        for name in ("weight_decay", "entropy", "value_coef", "logits_l2", "distance_step", "aux_coef"):
+        for name in ("weight_decay", "entropy", "value_coef", "logits_l2", "distance_step", "aux_coef",
+                     "bc_coef"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
         if self.shared and self.use_semantic:
@@ -169,6 +176,11 @@ class TrainConfig:
                                  kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed,
                                  use_semantic=self.use_semantic, target_input=self.shared,
                                  prev_action=self.prev_action, aux=self.aux_coef > 0)
+
+    @property
+    def labelled(self) -> bool:
+        """Whether the environments label their states with the teacher's actions (DAgger, or A2C with ``bc_coef``)."""
+        return self.method != "a2c" or self.bc_coef > 0
 
     @property
     def batch(self) -> int:

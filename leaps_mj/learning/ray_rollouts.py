@@ -127,7 +127,7 @@ class RolloutWorker:
         self._houses = tempfile.TemporaryDirectory(prefix="leaps_mj_shards_")
         kwargs = rollouts.env_kwargs(config, target, targets, first_iteration, pathlib.Path(self._houses.name))
         seed = rollouts.env_seed(config, network, first_iteration)
-        self.envs = _Group([make_training_env(seed + i, config, first_iteration, config.method != "a2c", **kwargs[i])
+        self.envs = _Group([make_training_env(seed + i, config, first_iteration, config.labelled, **kwargs[i])
                             for i in envs])
         self.model = nets.ActorCritic(config.policy_config())
         self.timesteps = [env.reset() for env in self.envs.envs]

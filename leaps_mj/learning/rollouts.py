@@ -308,7 +308,7 @@ class LocalRollouts:
 
     def __init__(self, config: TrainConfig, kwargs: Sequence[dict], seed: int, first_iteration: int):
         self.config = config
-        self._envs = training_vector_env(kwargs, seed, config, first_iteration, config.method != "a2c")
+        self._envs = training_vector_env(kwargs, seed, config, first_iteration, config.labelled)
         self._timesteps = self._envs.reset()
         self._state = None
 

@@ -268,8 +268,10 @@ class Trainer(trainer_lib.Trainer):
             actions = torch.as_tensor(batch["actions"], device=dev)
             loss, out = a2c_loss(logits, values, actions, returns, valid, c)
             if (unroll.labels >= 0).any():
-                _, out["expert_agreement"] = bc_loss(logits.detach(), torch.as_tensor(unroll.labels, device=dev),
-                                                     valid)
+                ce, out["expert_agreement"] = bc_loss(logits, torch.as_tensor(unroll.labels, device=dev), valid)
+                out["bc_cross_entropy"] = ce.item()
+                if c.bc_coef > 0:
+                    loss = loss + c.bc_coef * ce
             out["grad_norm"] = self._step(self._with_aux(loss, aux, out))
         return {**out, **self._times}
 
