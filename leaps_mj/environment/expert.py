@@ -12,6 +12,11 @@ field for ``lookahead`` metres from the agent's cell; the agent turns (30° or
 Inside the target room it heads for a viewing zone near that room's
 "see" objects, turns to face the nearest one and stays while the success test
 holds.
+
+:class:`ScanningGeodesicExpert` walks the same paths but, while the way
+ahead lies outside the camera's horizontal field of view, always turns left
+instead of the shorter way round: a teacher whose choice where the frames
+cannot tell left from right is a fixed, learnable rule.
 """
 
 from __future__ import annotations
@@ -37,6 +42,12 @@ def _turn(err: float) -> int:
     return SMALL_LEFT if err > 0 else SMALL_RIGHT
 
 
+def half_view(env) -> float:
+    """Half the horizontal field of view (radians) of the environment's first-person camera."""
+    fovy = math.radians(float(env.physics.model.cam_fovy[0]))
+    return math.atan(env.config.width / env.config.height * math.tan(fovy / 2))
+
+
 class GeodesicExpert:
     """Shortest-path oracle for a :class:`leaps_mj.environment.roomnav.RoomNavEnvironment`.
 
@@ -45,6 +56,9 @@ class GeodesicExpert:
       seed: seed of the small random moves it makes when blocked.
       lookahead: metres of path ahead used as the steering waypoint.
     """
+
+    #: Turn left whenever the way is out of view (:class:`ScanningGeodesicExpert`), not the shorter way.
+    scan = False
 
     def __init__(self, env, seed: int = 0, lookahead: float = 0.6):
         self.env = env
@@ -163,8 +177,14 @@ class GeodesicExpert:
             return int(self.rng.choice([LEFT, RIGHT, SMALL_FORWARD]))
         err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - pose[2], 2 * math.pi)
         if abs(err) > _FACE_TOL:
-            return _turn(err)
+            return self.turn(err)
         return FORWARD if np.hypot(*(wp - pose[:2])) > 0.45 else SMALL_FORWARD
+
+    def turn(self, err: float) -> int:
+        """Rotation action towards a heading error (radians, left positive): the shorter way, or left when scanning."""
+        if self.scan and abs(err) > half_view(self.env):
+            return LEFT
+        return _turn(err)
 
     def act(self, timestep=None) -> int:
         """The expert's action for the environment's current state."""
@@ -187,5 +207,19 @@ class GeodesicExpert:
         px, py = pts[int(np.argmin(d))]
         err = math.remainder(math.atan2(py - pose[1], px - pose[0]) - pose[2], 2 * math.pi)
         if abs(err) > math.radians(10):
-            return _turn(err)
+            return self.turn(err)
         return SMALL_FORWARD if d.min() > 1.0 else int(self.rng.choice([SMALL_LEFT, SMALL_RIGHT]))
+
+
+class ScanningGeodesicExpert(GeodesicExpert):
+    """The geodesic expert turning left whenever the way ahead is out of the camera's view.
+
+    Where the waypoint lies beyond the horizontal field of view, the frames
+    cannot show which way round is shorter, and the geodesic expert's labels
+    there (left or right, by the map) are a coin flip to a learner: imitating
+    them teaches it to dither. This teacher scans left until the way comes
+    into view, then steers to it as the geodesic expert does, at the cost of
+    at most about half a turn of extra rotation.
+    """
+
+    scan = True

@@ -99,6 +99,7 @@ AGENTS = {
     "controller": AgentSpec("controller", "controller"),
     "aug": AgentSpec("aug", "aug"),
     "oracle": AgentSpec("oracle", "oracle"),
+    "oracle-scan": AgentSpec("oracle-scan", "oracle-scan"),
     "observable": AgentSpec("observable", "observable"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.

@@ -15,7 +15,8 @@ from leaps_mj.world import dataset as dataset_lib
 
 METHODS = ("a2c", "dagger", "dagger+a2c")
 #: DAgger teachers by name: the map-reading geodesic expert, or the one acting only on what was observed.
-TEACHERS = {"geodesic": expert.GeodesicExpert, "observable": observable_expert.ObservableExpert}
+TEACHERS = {"geodesic": expert.GeodesicExpert, "geodesic-scan": expert.ScanningGeodesicExpert,
+            "observable": observable_expert.ObservableExpert}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,7 +50,10 @@ class TrainConfig:
         dithering between turns it cannot tell apart. Empty: none.
       teacher: Whose actions label the DAgger samples (a key of
         :data:`TEACHERS`): "geodesic" (reads the map, so some of its choices
-        cannot be known from the frames) or "observable" (chooses from the
+        cannot be known from the frames), "geodesic-scan" (the same, but
+        turning left whenever the way is out of view,
+        :class:`leaps_mj.environment.expert.ScanningGeodesicExpert`) or
+        "observable" (chooses from the
         rooms seen and the doors passed so far,
         :class:`leaps_mj.environment.observable_expert.ObservableExpert`).
       total_steps: Environment steps per target (all environments together).

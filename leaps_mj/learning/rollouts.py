@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import argparse
 import pathlib
 import time
 from typing import Sequence
@@ -68,6 +69,21 @@ def check_backend(backend: str, num_workers: int | None, ray_address: str | None
     if num_workers is not None and (isinstance(num_workers, bool) or not isinstance(num_workers, int)
                                     or not 1 <= num_workers <= num_envs):
         raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, {items}={num_envs}]")
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser, what: str, workers_help: str) -> None:
+    """Adds a trainer's ``--backend``, ``--ray-address`` and ``--num-workers`` (checked by :func:`check_backend`).
+
+    Args:
+      parser: The trainer's command.
+      what: What runs on the backend ("rollouts", "training episodes").
+      workers_help: What one Ray actor holds, and the default number of actors.
+    """
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help=f"where {what} run: this machine, or Ray actors (docs/ray.md)")
+    parser.add_argument("--ray-address", default=None,
+                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
+    parser.add_argument("--num-workers", type=int, default=None, help=f"Ray actors, {workers_help} (with --backend ray)")
 
 
 @dataclasses.dataclass

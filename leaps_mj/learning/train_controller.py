@@ -364,13 +364,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more updates (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    parser.add_argument("--backend", choices=rollouts.BACKENDS, default="local",
-                        help="where training episodes run: this process, or Ray actors (docs/ray.md)")
-    parser.add_argument("--ray-address", default=None,
-                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
-    parser.add_argument("--num-workers", type=int, default=None,
-                        help="Ray actors, each playing batch_episodes / N episodes per update (with --backend ray; "
-                             "default: one per cluster CPU, at most batch_episodes)")
+    rollouts.add_backend_arguments(parser, "training episodes", "each playing batch_episodes / N episodes per "
+                                   "update (default: one per cluster CPU, at most batch_episodes)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):
         if field.name != "subpolicy":

@@ -361,13 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop each target after this many more iterations (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--backend", choices=rollouts.BACKENDS, default="local",
-                        help="where rollouts run: local worker processes, or Ray actors (docs/ray.md)")
-    parser.add_argument("--ray-address", default=None,
-                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
-    parser.add_argument("--num-workers", type=int, default=None,
-                        help="Ray rollout actors, each holding num_envs / N environments (with --backend ray; "
-                             "default: one per cluster CPU, at most num_envs)")
+    rollouts.add_backend_arguments(parser, "rollouts", "each holding num_envs / N environments (default: one per "
+                                   "cluster CPU, at most num_envs)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):
         default = field.default

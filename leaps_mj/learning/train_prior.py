@@ -14,7 +14,10 @@ pair, clipped to [1e-4, 1 - 1e-4] (:func:`leaps_mj.planning.semantic.learn_prior
 Pairs are counted only in houses where both nodes are present, so the prior is
 P(connected | both present), as in the paper.
 
-Houses are explored by worker processes, in the split's order; the pooled
+Houses are explored by worker processes (``--workers``), or by Ray actors
+across a cluster (``--backend ray [--ray-address ADDR] [--num-workers N]``,
+:mod:`leaps_mj.learning.ray_prior`), in the split's order; every house's runs
+are seeded by the house alone, so both backends count the same. The pooled
 counts are checkpointed atomically to ``<out>/state.json`` after every house
 (:mod:`leaps_mj.learning.trainer`), so an interrupted run resumes where it
 stopped, and a run under other settings in the same folder is refused. Outputs: ``<out>/prior.json`` (a
@@ -40,6 +43,7 @@ import numpy as np
 
 from leaps_mj.environment import roomnav
 from leaps_mj.environment.roomnav import EpisodeSpec
+from leaps_mj.learning import rollouts
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.planning import semantic
 from leaps_mj.world import dataset as dataset_lib
@@ -155,20 +159,36 @@ def explore_house(env, house_id: str, config: PriorConfig) -> tuple[np.ndarray, 
     return pos, trials
 
 
-_ENV = None
+class HouseExplorer:
+    """Explores houses with one blind environment over the split: a worker process's, or a Ray actor's.
+
+    Args:
+      config: the run's settings.
+    """
+
+    def __init__(self, config: PriorConfig):
+        self.config = config
+        self.env = roomnav.load(config.dataset, config.split, pixels=False, width=8, height=8,
+                                horizon=config.steps, cache_size=2)
+
+    def explore(self, house_ids: list[str]) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """``(house id, positives, trials)`` of each house (:func:`explore_house`), in order."""
+        return [(hid, *explore_house(self.env, hid, self.config)) for hid in house_ids]
+
+    def close(self) -> None:
+        self.env.close()
+
+
+_EXPLORER: HouseExplorer | None = None
 
 
 def _init_worker(config: PriorConfig) -> None:
-
-    global _ENV
-    _ENV = roomnav.load(config.dataset, config.split, pixels=False, width=8, height=8,
-                         horizon=config.steps, cache_size=2)
+    global _EXPLORER
+    _EXPLORER = HouseExplorer(config)
 
 
-def _explore_job(args) -> tuple[str, np.ndarray, np.ndarray]:
-    house_id, config = args
-    pos, trials = explore_house(_ENV, house_id, config)
-    return house_id, pos, trials
+def _explore_job(house_id: str) -> tuple[str, np.ndarray, np.ndarray]:
+    return _EXPLORER.explore([house_id])[0]
 
 
 class Trainer(trainer_lib.Trainer):
@@ -181,16 +201,22 @@ class Trainer(trainer_lib.Trainer):
     Args:
       config: the run's settings.
       out: the run's folder.
-      workers: worker processes exploring houses in parallel.
+      workers: worker processes exploring houses in parallel (local backend).
       progress: show a progress bar.
+      backend: where houses are explored, "local" or "ray".
+      num_workers: Ray actors (default: one per cluster CPU, at most one per house).
+      ray_address: the Ray cluster's address (default: a local instance).
     """
 
     unit = "house"
 
-    def __init__(self, config: PriorConfig, out: str | os.PathLike, workers: int = 1, progress: bool = True):
+    def __init__(self, config: PriorConfig, out: str | os.PathLike, workers: int = 1, progress: bool = True,
+                 backend: str = "local", num_workers: int | None = None, ray_address: str | None = None):
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers {workers!r}: expected a positive integer")
         self.house_ids = [p.stem for p in dataset_lib.list_houses(config.dataset, config.split)][: config.houses]
+        rollouts.check_backend(backend, num_workers, ray_address, len(self.house_ids), "houses")
+        self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         super().__init__(config, out, len(self.house_ids), state_name="state.json", progress=progress,
                          desc="prior: houses")
         self.workers = workers
@@ -207,22 +233,26 @@ class Trainer(trainer_lib.Trainer):
 
     @contextlib.contextmanager
     def session(self):
-        """Workers exploring the remaining houses in order (results come back in that order)."""
-        jobs = [(hid, self.config) for hid in self.house_ids[self.iteration:]]
-        pool = None
-        if self.workers > 1 and len(jobs) > 1:
-            pool = multiprocessing.get_context("spawn").Pool(min(self.workers, len(jobs)), _init_worker,
-                                                             (self.config,))
-            self._results = pool.imap(_explore_job, jobs)
-        else:
-            _init_worker(self.config)
-            self._results = map(_explore_job, jobs)
-        try:
+        """Workers or Ray actors exploring the remaining houses in order (results come back in that order)."""
+        jobs = self.house_ids[self.iteration:]
+        with contextlib.ExitStack() as stack:
+            if self.backend == "ray":
+                from leaps_mj.learning import ray_prior
+
+                self._ray = stack.enter_context(ray_prior.RayExplorers(
+                    HouseExplorer, self.config, len(jobs), self.num_workers, self.ray_address))
+                self._results = self._ray.explore(jobs)
+            elif self.workers > 1 and len(jobs) > 1:
+                pool = multiprocessing.get_context("spawn").Pool(min(self.workers, len(jobs)), _init_worker,
+                                                                 (self.config,))
+                stack.callback(pool.join)
+                stack.callback(pool.terminate)
+                self._results = pool.imap(_explore_job, jobs)
+            else:
+                explorer = HouseExplorer(self.config)
+                stack.callback(explorer.close)
+                self._results = (explorer.explore([hid])[0] for hid in jobs)
             yield
-        finally:
-            if pool is not None:
-                pool.terminate()
-                pool.join()
 
     def iterate(self) -> dict:
         t0 = time.perf_counter()
@@ -239,8 +269,10 @@ class Trainer(trainer_lib.Trainer):
                 "prior": semantic.learn_prior(self.pos, self.trials, floor=self.config.floor)}
 
 
-def learn(config: PriorConfig, out: pathlib.Path, workers: int = 1, progress: bool = True) -> dict:
+def learn(config: PriorConfig, out: pathlib.Path, workers: int = 1, progress: bool = True, **backend) -> dict:
     """Explores the houses (resuming from the last checkpoint) and returns the pooled counts and prior.
+
+    ``backend``: ``backend``, ``num_workers``, ``ray_address`` of :class:`Trainer`.
 
     Returns:
       ``{"pos": (9, 9), "trials": (9, 9), "prior": (9, 9), "houses": n, "resumed": n}``.
@@ -248,7 +280,7 @@ def learn(config: PriorConfig, out: pathlib.Path, workers: int = 1, progress: bo
     Raises:
       ValueError: for a bad worker count, or a checkpoint in ``out`` made with other settings.
     """
-    trainer = Trainer(config, out, workers, progress)
+    trainer = Trainer(config, out, workers, progress, **backend)
     trainer.train()
     return trainer.result()
 
@@ -274,7 +306,9 @@ def main(argv=None) -> int:
     p.add_argument("--houses", type=int, default=None, help="explore only the first N houses")
     p.add_argument("--trials", type=int, default=None, help="runs per present room type per house")
     p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--workers", type=int, default=1, help="worker processes")
+    p.add_argument("--workers", type=int, default=1, help="worker processes (local backend)")
+    rollouts.add_backend_arguments(p, "houses' explorations", "each exploring one house at a time (default: one per "
+                                   "cluster CPU, at most one per house)")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("dataset", args.dataset), ("houses", args.houses),
                                    ("trials", args.trials), ("seed", args.seed)) if v is not None}
@@ -285,7 +319,8 @@ def main(argv=None) -> int:
     out = args.out or pathlib.Path("runs") / f"prior_{args.preset}"
     out.mkdir(parents=True, exist_ok=True)
     print(f"prior: {config}", flush=True)
-    result = learn(config, out, workers=args.workers)
+    result = learn(config, out, workers=args.workers, backend=args.backend, num_workers=args.num_workers,
+                   ray_address=args.ray_address)
     model = semantic.SemanticModel(result["prior"])
     model.to_json(out / "prior.json")
     semantic.plot_prior(result["prior"], out / "prior.png")

@@ -159,6 +159,15 @@ class OracleAgent:
         return {"subtarget": self.target, "plan": [], "belief": None}
 
 
+class ScanningOracleAgent(OracleAgent):
+    """The geodesic expert turning left whenever the way is out of view
+    (:class:`leaps_mj.environment.expert.ScanningGeodesicExpert`): the ``geodesic-scan`` teacher, as an agent.
+    """
+
+    name = "oracle-scan"
+    expert_class = expert.ScanningGeodesicExpert
+
+
 class ObservableAgent(OracleAgent):
     """The observable expert (:class:`leaps_mj.environment.observable_expert.ObservableExpert`).
 
