@@ -194,7 +194,7 @@ def _run(env, agent, spec):
     return env.task.success
 
 
-@pytest.mark.parametrize("name", ["pure", "oracle"])
+@pytest.mark.parametrize("name", ["pure", "oracle", "oracle-scan"])
 def test_local_expert_and_oracle_reach_a_near_target(env, tiny_dataset, name):
     assert _run(env, registry.make_agent(name, env, seed=1), _episode(tiny_dataset, 1))
 

@@ -1,6 +1,7 @@
 """RoomNav environment: dm_env conformance, determinism, success test, bad input."""
 
 import json
+import math
 import unittest
 
 import dm_env
@@ -143,6 +144,33 @@ def test_oracle_succeeds_and_success_means_seeing(tiny_dataset):
         if spec.target != "outdoor":
             assert min(fractions[-3:]) >= 0.045
         assert e.task.in_target
+    e.close()
+
+
+def test_scanning_expert_turns_left_while_the_way_is_out_of_view(tiny_dataset):
+    """Out of view, always left (the geodesic expert turns the shorter way); in view, the geodesic expert's action."""
+    e = leaps_mj.load(str(tiny_dataset), "test", seed=0, horizon=500)
+    guide, scan = expert.GeodesicExpert(e), expert.ScanningGeodesicExpert(e)
+    half = expert.half_view(e)
+    assert math.isclose(math.degrees(half), 37.6, abs_tol=0.1)  # fovy 60 at 4:3
+    rights = 0
+    for spec in episodes.load_split(str(tiny_dataset), "test")[::3]:
+        e.reset_to(spec)
+        x, y, _ = e.physics.agent_pose()
+        field, nearest, _ = guide.field(spec.target, bool(rooms.SEE_OBJECTS.get(spec.target)))
+        wp = guide.waypoint(field, nearest, np.array([x, y]))
+        if wp is None:
+            continue
+        way = math.atan2(wp[1] - y, wp[0] - x)
+        for offset in (-150, -90, -50, 50, 90, 150, -25, 25):  # heading minus the way's direction, degrees
+            e.physics.set_agent_pose(np.array([x, y, way + math.radians(offset)]))
+            want = guide.act()
+            if abs(offset) > math.degrees(half):
+                assert scan.act() == expert.LEFT, (spec, offset)
+                rights += want == expert.RIGHT
+            else:
+                assert scan.act() == want == (expert.RIGHT if offset > 0 else expert.LEFT), (spec, offset)
+    assert rights > 0, "the geodesic expert turned right somewhere the scanning one turned left"
     e.close()
 
 
