@@ -61,6 +61,10 @@ class TuneConfig:
     seed: int = 0
 
     def __post_init__(self):
+        if self.episodes_per_length is not None and (isinstance(self.episodes_per_length, bool)
+                                                     or not isinstance(self.episodes_per_length, int)
+                                                     or self.episodes_per_length < 1):
+            raise ValueError(f"episodes_per_length {self.episodes_per_length!r}: expected a positive integer or None")
         for name in ("psi_obs0", "psi_obs1"):
             values = getattr(self, name)
             if not values or any(not 0.0 <= v < 1.0 for v in values):
@@ -108,6 +112,13 @@ def tune(config: TuneConfig, prior: pathlib.Path, out: pathlib.Path, subpolicy: 
     return choose({psi: r["rate"] for psi, r in per_point.items()}), per_point
 
 
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated numbers") from None
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m leaps_mj.train obs-noise", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -120,9 +131,17 @@ def main(argv=None) -> int:
     p.add_argument("--subpolicy", choices=["local", "learned"], default="local")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--psi-obs0", type=_floats, default=None, help="grid of psi_obs0, comma-separated (default: preset's)")
+    p.add_argument("--psi-obs1", type=_floats, default=None, help="grid of psi_obs1, comma-separated (default: preset's)")
+    p.add_argument("--episodes-per-length", type=int, default=None,
+                   help="validation episodes per plan length (default: preset's)")
     args = p.parse_args(argv)
-    overrides = {k: v for k, v in (("dataset", args.dataset), ("seed", args.seed)) if v is not None}
-    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    overrides = {k: getattr(args, k) for k in ("dataset", "seed", "psi_obs0", "psi_obs1", "episodes_per_length")
+                 if getattr(args, k) is not None}
+    try:
+        config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    except ValueError as e:
+        p.error(str(e))
     out = args.out or pathlib.Path("runs") / f"prior_{args.preset}"
     prior = args.prior
     if prior is None:
