@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -83,3 +84,24 @@ def test_obs_noise_tiny_preset_writes_the_chosen_noise(tiny_dataset, tmp_path, c
     table = (out / "obs_noise.md").read_text()
     assert table.count("\n| 0.") == 2 and table.count("**chosen**") == 1
     assert "chosen psi_obs0" in capsys.readouterr().out
+
+
+def test_obs_noise_grid_options_override_the_preset(tiny_dataset, tmp_path):
+    out = tmp_path / "tune"
+    out.mkdir()
+    semantic.SemanticModel.from_reference().to_json(out / "prior.json")
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(out), "--psi-obs0", "0.002",
+            "--psi-obs1", "0.5,0.7"]
+    assert tune_obs_noise.main(argv) == 0
+    model = semantic.SemanticModel.from_json(out / "prior.json")
+    assert (model.psi_obs0, model.psi_obs1) in [(0.002, 0.5), (0.002, 0.7)]
+    assert (out / "obs_noise.md").read_text().count("\n| 0.002 |") == 2
+
+
+@pytest.mark.parametrize("bad, match", [(["--psi-obs1", "0.5,x"], "expected comma-separated numbers"),
+                                        (["--psi-obs1", "1.5"], r"psi_obs1 grid \(1.5,\): expected probabilities"),
+                                        (["--episodes-per-length", "0"], "episodes_per_length 0: expected")])
+def test_obs_noise_bad_grid_options_are_refused_naming_the_value(bad, match, capsys):
+    with pytest.raises(SystemExit):
+        tune_obs_noise.main(["--preset", "tiny", *bad])
+    assert re.search(match, capsys.readouterr().err)
