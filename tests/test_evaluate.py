@@ -1,6 +1,7 @@
 """Tests for the evaluation harness: the episode loop, statistics, files, plots and resuming."""
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -163,3 +164,15 @@ def test_bad_backend_options_are_usage_errors(tiny_dataset, tmp_path, capsys, ex
     assert e.value.code == 2 and message in capsys.readouterr().err
     with pytest.raises(ValueError, match="backend 'dask'"):
         evaluate.run(evaluate.EvalConfig(), [], [], tmp_path / "x", backend="dask")
+
+
+def test_leaps_prior_defaults_by_subpolicy(tiny_dataset, tmp_path):
+    """Without --prior, LEAPS gets the shipped prior tuned for its sub-policy: one matrix, two noises."""
+    local, learned = (agents.load_model(agents.SUBPOLICY_PRIORS[k]) for k in ("local", "learned"))
+    np.testing.assert_array_equal(local.prior, learned.prior)
+    assert learned.psi_obs1 > local.psi_obs1, "failures of the learned sub-policies say less about connectivity"
+    for subpolicy, name in agents.SUBPOLICY_PRIORS.items():
+        out = tmp_path / subpolicy
+        assert evaluate.main(["--agent", "leaps", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "5",
+                              "--out", str(out), "--limit", "1", "--no-progress", "--subpolicy", subpolicy]) == 0
+        assert json.loads((out / "config.json").read_text())["prior"] == name

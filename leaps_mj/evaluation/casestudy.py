@@ -97,12 +97,14 @@ def main(argv=None) -> int:
     p.add_argument("--dataset", default=dataset_lib.CANONICAL)
     p.add_argument("--out", type=pathlib.Path, required=True, help="PNG file")
     p.add_argument("--horizon", type=int, default=1000)
-    p.add_argument("--prior", default=agents_lib.DEFAULT_PRIOR)
+    p.add_argument("--prior", default=None,
+                   help=f"LEAPS prior (default: by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
     p.add_argument("--rule", choices=agents_lib.RULES, default="paper")
     p.add_argument("--replan-every", type=int, default=30)
     p.add_argument("--subpolicy", choices=["local", "learned"], default="local")
     p.add_argument("--seed", type=int, default=0, help="evaluation seed (agent seed of episode K derives from it)")
     args = p.parse_args(argv)
+    args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
     try:
         specs = episodes_lib.load_split(args.dataset, args.split)
         if not 0 <= args.episode < len(specs):

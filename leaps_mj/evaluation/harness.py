@@ -623,8 +623,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=pathlib.Path, required=True, help="result folder (resumable)")
     p.add_argument("--subpolicy", choices=["local", "learned"], default="local",
                    help="local: the privileged local expert; learned: leaps_mj.learning.policies.load_default()")
-    p.add_argument("--prior", default=agents_lib.DEFAULT_PRIOR,
-                   help="LEAPS prior: a shipped name (cpu), 'reference', or a JSON path")
+    p.add_argument("--prior", default=None,
+                   help="LEAPS prior: a shipped name (cpu, cpu_learned), 'reference', or a JSON path (default: "
+                        f"by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
     p.add_argument("--replan-every", type=int, default=30, help="LEAPS's N")
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
                    help=f"episodes per plan length: {SUBSETS}")
@@ -641,6 +642,7 @@ def main(argv=None) -> int:
     if horizons[0] < 1:
         p.error(f"--horizon {args.horizon}: expected positive integers")
     where = backends.from_arguments(p, args)
+    args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
                             prior=args.prior, replan_every=args.replan_every, seed=args.seed)
