@@ -176,3 +176,12 @@ def test_leaps_prior_defaults_by_subpolicy(tiny_dataset, tmp_path):
         assert evaluate.main(["--agent", "leaps", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "5",
                               "--out", str(out), "--limit", "1", "--no-progress", "--subpolicy", subpolicy]) == 0
         assert json.loads((out / "config.json").read_text())["prior"] == name
+
+
+def test_temperature_is_a_learned_subpolicy_option_left_out_of_config_json_at_one():
+    assert "temperature" not in evaluate.EvalConfig(subpolicy="learned").to_json()
+    assert evaluate.EvalConfig(subpolicy="learned", temperature=0.5).to_json()["temperature"] == 0.5
+    with pytest.raises(ValueError, match="temperature 0.5 needs subpolicy 'learned', not 'local'"):
+        evaluate.EvalConfig(subpolicy="local", temperature=0.5)
+    with pytest.raises(ValueError, match="temperature 0: expected a positive number"):
+        evaluate.EvalConfig(subpolicy="learned", temperature=0)

@@ -73,6 +73,17 @@ def test_sampling_is_seeded_and_greedy_is_deterministic(folder, env):
     assert greedy[0] == greedy[1]
 
 
+def test_temperature_sharpens_sampling_towards_greedy(folder, env):
+    env.reset()
+    spec = env.episode
+    greedy = run(policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True), env, spec)
+    cold = run(policies.LearnedSubPolicy(folder, targets=("kitchen",), seed=7, temperature=1e-7), env, spec)
+    assert cold == greedy
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match=f"temperature {bad}: expected a positive number"):
+            policies.LearnedSubPolicy(folder, targets=("kitchen",), temperature=bad)
+
+
 def test_reset_clears_the_lstm_state(folder, env):
     policy = policies.LearnedSubPolicy(folder, targets=("kitchen",), greedy=True)
     env.reset()

@@ -129,6 +129,8 @@ class EvalConfig:
         :data:`leaps_mj.environment.episodes.EPISODE_SETS`: "plan_length" or "hops").
       policy_dir: with ``subpolicy="learned"``, a folder of sub-policy
         checkpoints (``<node>.pt``) to run instead of the shipped ones.
+      temperature: with ``subpolicy="learned"``, the sampling temperature of
+        the sub-policies' actions (1: as trained; below 1 sharper).
     """
 
     dataset: str = dataset_lib.CANONICAL
@@ -140,6 +142,7 @@ class EvalConfig:
     seed: int = 0
     episodes: str = "plan_length"
     policy_dir: str | None = None
+    temperature: float = 1.0
 
     def __post_init__(self):
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
@@ -150,6 +153,10 @@ class EvalConfig:
             raise ValueError(f"episodes {self.episodes!r}: expected one of {list(episodes_lib.EPISODE_SETS)}")
         if self.policy_dir is not None and self.subpolicy != "learned":
             raise ValueError(f"policy_dir {self.policy_dir!r} needs subpolicy 'learned', not {self.subpolicy!r}")
+        if not self.temperature > 0:
+            raise ValueError(f"temperature {self.temperature!r}: expected a positive number")
+        if self.temperature != 1.0 and self.subpolicy != "learned":
+            raise ValueError(f"temperature {self.temperature!r} needs subpolicy 'learned', not {self.subpolicy!r}")
 
     def to_json(self) -> dict:
         """The settings as ``config.json`` holds them.
@@ -166,7 +173,7 @@ class EvalConfig:
 
 
 #: Fields of :class:`EvalConfig` newer than the committed results, with their defaults.
-LATER_FIELDS = {"episodes": "plan_length", "policy_dir": None}
+LATER_FIELDS = {"episodes": "plan_length", "policy_dir": None, "temperature": 1.0}
 
 
 # -- workers -----------------------------------------------------------------
@@ -199,12 +206,12 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, recor
     _WORKER["recorders"] = {}
     _WORKER["subpolicy"] = None
     if config.subpolicy == "learned":
-        _WORKER["subpolicy"] = learned_subpolicy(config.policy_dir)
+        _WORKER["subpolicy"] = learned_subpolicy(config.policy_dir, config.temperature)
 
 
-def learned_subpolicy(policy_dir: str | None):
+def learned_subpolicy(policy_dir: str | None, temperature: float = 1.0):
     """The learned sub-policies: the shipped ones, or those in ``policy_dir`` (every ``<node>.pt``
-    checkpoint, and a ``shared.pt`` network for the nodes without one).
+    checkpoint, and a ``shared.pt`` network for the nodes without one), sampling at ``temperature``.
 
     Raises:
       ValueError: if the folder holds no checkpoint of a graph node, or one is unreadable.
@@ -213,12 +220,12 @@ def learned_subpolicy(policy_dir: str | None):
     from leaps_mj.world import rooms
 
     if policy_dir is None:
-        return policies.load_default()
+        return policies.load_default(temperature=temperature)
     targets = policies.folder_targets(policy_dir)
     if not targets:
         raise ValueError(f"policy folder {policy_dir!r} holds no sub-policy checkpoint <node>.pt or shared.pt "
                          f"for any of {list(rooms.GRAPH_NODES)}")
-    return policies.LearnedSubPolicy(policy_dir, targets)
+    return policies.LearnedSubPolicy(policy_dir, targets, temperature=temperature)
 
 
 def _build_agent(spec: AgentSpec, seed: int):
@@ -627,6 +634,8 @@ def main(argv=None) -> int:
                    help="LEAPS prior: a shipped name (cpu, cpu_learned), 'reference', or a JSON path (default: "
                         f"by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
     p.add_argument("--replan-every", type=int, default=30, help="LEAPS's N")
+    p.add_argument("--temperature", type=float, default=1.0,
+                   help="sampling temperature of the learned sub-policies' actions (1: as trained)")
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
                    help=f"episodes per plan length: {SUBSETS}")
     p.add_argument("--episodes-per-length", type=int, default=None, help="overrides --subset")
@@ -645,7 +654,8 @@ def main(argv=None) -> int:
     args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
-                            prior=args.prior, replan_every=args.replan_every, seed=args.seed)
+                            prior=args.prior, replan_every=args.replan_every, seed=args.seed,
+                            temperature=args.temperature)
         if "leaps" in " ".join(args.agent):
             agents_lib.load_model(args.prior)  # fail now, not in a worker
         if args.record:

@@ -162,7 +162,8 @@ def _cell(r: dict) -> str:
 def _policy_name(config: harness.EvalConfig) -> str:
     if config.subpolicy == "local":
         return "the local expert (privileged)"
-    return f"learned, `{config.policy_dir}`" if config.policy_dir else "learned, shipped (`leaps_mj/data/policies/cpu`)"
+    which = f"learned, `{config.policy_dir}`" if config.policy_dir else "learned, shipped (`leaps_mj/data/policies/cpu`)"
+    return which if config.temperature == 1.0 else f"{which}, sampled at temperature {config.temperature:g}"
 
 
 def markdown(summary: dict, horizons, config: harness.EvalConfig, comparison: dict | None = None,
@@ -289,6 +290,8 @@ def main(argv=None) -> int:
     p.add_argument("--subpolicy", choices=["local", "learned"], default="learned",
                    help="learned: the shipped sub-policies or --policy-dir; local: the privileged local expert")
     p.add_argument("--policy-dir", default=None, help="folder of sub-policy checkpoints <node>.pt to evaluate")
+    p.add_argument("--temperature", type=float, default=1.0,
+                   help="sampling temperature of the learned sub-policies' actions (1: as trained)")
     p.add_argument("--baseline", type=pathlib.Path, default=None,
                    help="an earlier hop result folder whose pure results are paired with this run's")
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
@@ -310,7 +313,7 @@ def main(argv=None) -> int:
     try:
         config = harness.EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1],
                                     subpolicy=args.subpolicy, seed=args.seed, episodes="hops",
-                                    policy_dir=args.policy_dir)
+                                    policy_dir=args.policy_dir, temperature=args.temperature)
         specs = episodes_lib.load_split(args.dataset, args.split, "hops")
         # Node filter after the draw: a run on some nodes gets the full run's episodes of those nodes.
         indices = [i for i in episodes_lib.select_episodes(specs, args.per_node or SUBSETS[args.subset],

@@ -57,6 +57,8 @@ class LearnedSubPolicy:
       targets: Targets to load (default: the 8 room types and ``indoor``).
       greedy: Take the most likely action instead of sampling one.
       seed: Seed of the action sampling.
+      temperature: Actions are sampled from softmax(logits / temperature):
+        1 is the trained distribution, below 1 sharper (towards greedy).
       width, height: If given, the resolution the checkpoints must have.
       use_semantic: Whether the checkpoints must be μ_s networks (True) or
         pixel-only sub-policies (False).
@@ -74,8 +76,10 @@ class LearnedSubPolicy:
 
     def __init__(self, folder: str | os.PathLike, targets: Sequence[str] = rooms.GRAPH_NODES,
                  greedy: bool = False, seed: int = 0, width: int | None = None, height: int | None = None,
-                 use_semantic: bool = False):
+                 use_semantic: bool = False, temperature: float = 1.0):
         folder = pathlib.Path(folder)
+        if not temperature > 0:
+            raise ValueError(f"temperature {temperature!r}: expected a positive number (greedy=True for argmax)")
         if not targets:
             raise ValueError("targets is empty: expected at least one room type")
         self.nets: dict[str, nets.ActorCritic] = {}
@@ -100,6 +104,7 @@ class LearnedSubPolicy:
         self.targets = tuple(targets)
         self.use_semantic = use_semantic
         self.greedy = greedy
+        self.temperature = float(temperature)
         self._generator = torch.Generator().manual_seed(seed)
         self._net: nets.ActorCritic | None = None
         self._state = None
@@ -162,7 +167,8 @@ class LearnedSubPolicy:
         if self.greedy:
             self._prev_action = int(logits.argmax(-1))
         else:
-            self._prev_action = int(torch.multinomial(torch.softmax(logits[0], -1), 1, generator=self._generator))
+            probs = torch.softmax(logits[0] / self.temperature, -1)
+            self._prev_action = int(torch.multinomial(probs, 1, generator=self._generator))
         return self._prev_action
 
 
@@ -184,20 +190,21 @@ def folder_targets(folder: str | os.PathLike) -> tuple[str, ...]:
 
 
 def _load_shipped(folder: pathlib.Path, targets: Sequence[str], command: str, use_semantic: bool,
-                  greedy: bool, seed: int) -> LearnedSubPolicy:
+                  greedy: bool, seed: int, temperature: float = 1.0) -> LearnedSubPolicy:
     missing = [t for t in targets if not checkpoint_path(folder, t).is_file()]
     if missing:
         raise ValueError(f"no shipped checkpoints for {missing} in {folder}; train them with `{command}`")
-    return LearnedSubPolicy(folder, targets, greedy=greedy, seed=seed, use_semantic=use_semantic)
+    return LearnedSubPolicy(folder, targets, greedy=greedy, seed=seed, use_semantic=use_semantic,
+                            temperature=temperature)
 
 
-def load_default(greedy: bool = False, seed: int = 0) -> LearnedSubPolicy:
+def load_default(greedy: bool = False, seed: int = 0, temperature: float = 1.0) -> LearnedSubPolicy:
     """The shipped sub-policies (cpu preset, 40x30) for the 8 room types and ``indoor``.
 
     Raises:
       ValueError: if a shipped checkpoint is missing, naming the command that trains them.
     """
-    return _load_shipped(DEFAULT_DIR, rooms.GRAPH_NODES, TRAIN_COMMAND, False, greedy, seed)
+    return _load_shipped(DEFAULT_DIR, rooms.GRAPH_NODES, TRAIN_COMMAND, False, greedy, seed, temperature)
 
 
 def load_augmented(greedy: bool = False, seed: int = 0) -> LearnedSubPolicy:
