@@ -157,6 +157,10 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(resumed_run, tmp_p
     fine = dataclasses.replace(config, method="a2c", init_from=str(out / "kitchen.pt"), lr=1e-4)
     trainer = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
     assert all(torch.equal(a, b) for a, b in zip(shipped.state_dict().values(), trainer.model.state_dict().values()))
+    from_folder = train_policy.Trainer(dataclasses.replace(fine, init_from=str(out)), "kitchen", tmp_path / "dir",
+                                       progress=False)
+    assert all(torch.equal(a, b) for a, b in zip(shipped.state_dict().values(),
+                                                 from_folder.model.state_dict().values())), "<folder>/kitchen.pt"
     trainer.train(1)
     resumed = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
     assert resumed.iteration == 1

@@ -44,10 +44,10 @@ class TrainConfig:
         labels the simulator gives for free and that only training reads.
       method: "a2c", "dagger" or "dagger+a2c".
       init_from: A policy checkpoint (``<target>.pt`` or ``shared.pt`` of
-        another run, same network) whose weights start the run instead of a
-        random initialisation: to fine-tune a DAgger-trained network with
-        A2C, where the learner's own reward teaches it to commit instead of
-        dithering between turns it cannot tell apart. Empty: none.
+        another run, same network), or a folder of them (each target starts
+        from its own), whose weights start the run instead of a random
+        initialisation: to continue a shipped set with another recipe, or
+        fine-tune a DAgger-trained network with A2C. Empty: none.
       teacher: Whose actions label the DAgger samples (a key of
         :data:`TEACHERS`): "geodesic" (reads the map, so some of its choices
         cannot be known from the frames), "geodesic-scan" (the same, but

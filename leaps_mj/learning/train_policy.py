@@ -143,9 +143,14 @@ class Trainer(trainer_lib.Trainer):
     def _warm_start(self, path: str) -> None:
         """Starts a new run from the weights of the policy checkpoint ``path`` (``config.init_from``).
 
+        A folder stands for its checkpoint of this run's network (``<target>.pt``,
+        else ``shared.pt``), so one option warm-starts every target of a per-target run.
+
         Raises:
           ValueError: naming the file, if it is not a policy checkpoint of this run's network.
         """
+        if pathlib.Path(path).is_dir():
+            path = policies.checkpoint_path(path, self.target)
         model, config, _ = nets.load_policy(path, self.config.width, self.config.height)
         if config != self.model.config:
             raise ValueError(f"init_from {path}: holds a network {config}, expected this run's {self.model.config}")
