@@ -164,8 +164,8 @@ def test_init_from_starts_a_new_run_from_another_runs_weights(resumed_run, tmp_p
     trainer.train(1)
     resumed = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
     assert resumed.iteration == 1
-    assert any(not torch.equal(a, b) for a, b in zip(shipped.state_dict().values(),
-                                                     resumed.model.state_dict().values())), "resumed, not re-initialised"
+    moved = [not torch.equal(a, b) for a, b in zip(shipped.state_dict().values(), resumed.model.state_dict().values())]
+    assert any(moved), "resumed, not re-initialised"
     with pytest.raises(ValueError, match="expected this run's"):
         train_policy.Trainer(dataclasses.replace(fine, lstm=8), "kitchen", tmp_path / "other", progress=False)
     with pytest.raises(ValueError, match="does not exist"):

@@ -162,7 +162,8 @@ def _cell(r: dict) -> str:
 def _policy_name(config: harness.EvalConfig) -> str:
     if config.subpolicy == "local":
         return "the local expert (privileged)"
-    which = f"learned, `{config.policy_dir}`" if config.policy_dir else "learned, shipped (`leaps_mj/data/policies/cpu`)"
+    shipped = "learned, shipped (`leaps_mj/data/policies/cpu`)"
+    which = f"learned, `{config.policy_dir}`" if config.policy_dir else shipped
     return which if config.temperature == 1.0 else f"{which}, sampled at temperature {config.temperature:g}"
 
 

@@ -131,8 +131,9 @@ def main(argv=None) -> int:
     p.add_argument("--subpolicy", choices=["local", "learned"], default="local")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--psi-obs0", type=_floats, default=None, help="grid of psi_obs0, comma-separated (default: preset's)")
-    p.add_argument("--psi-obs1", type=_floats, default=None, help="grid of psi_obs1, comma-separated (default: preset's)")
+    for name in ("psi_obs0", "psi_obs1"):
+        p.add_argument(f"--{name.replace('_', '-')}", type=_floats, default=None,
+                       help=f"grid of {name}, comma-separated (default: the preset's)")
     p.add_argument("--episodes-per-length", type=int, default=None,
                    help="validation episodes per plan length (default: preset's)")
     args = p.parse_args(argv)

@@ -83,7 +83,8 @@ def add_backend_arguments(parser: argparse.ArgumentParser, what: str, workers_he
                         help=f"where {what} run: this machine, or Ray actors (docs/ray.md)")
     parser.add_argument("--ray-address", default=None,
                         help="address of a running Ray cluster (with --backend ray; default: start a local one)")
-    parser.add_argument("--num-workers", type=int, default=None, help=f"Ray actors, {workers_help} (with --backend ray)")
+    parser.add_argument("--num-workers", type=int, default=None,
+                        help=f"Ray actors, {workers_help} (with --backend ray)")
 
 
 @dataclasses.dataclass
