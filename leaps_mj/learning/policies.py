@@ -31,9 +31,12 @@ from leaps_mj.world import rooms
 SHARED = "shared"
 #: Folder of the shipped checkpoints (cpu preset).
 DEFAULT_DIR = rooms.DATA_DIR / "policies" / "cpu"
-#: The command that trains them.
+#: The commands that train them: the cpu preset (108 k samples a target), then 72 k more from there with
+#: starts up to 13 m from the first iteration (session 5; docs/training.md).
 TRAIN_COMMAND = ("python -m leaps_mj.train policy --preset cpu --target all --out runs/policy_cpu && "
-                 f"cp runs/policy_cpu/*.pt {DEFAULT_DIR}/")
+                 "python -m leaps_mj.train policy --preset cpu --target all --init-from runs/policy_cpu "
+                 "--start-distance 13 --total-steps 72000 --out runs/policy_cpu_cont && "
+                 f"cp runs/policy_cpu_cont/*.pt {DEFAULT_DIR}/")
 #: Folder of the shipped semantic-augmented policies μ_s (cpu preset, the 8 room types).
 AUGMENTED_DIR = DEFAULT_DIR.parent / "aug_cpu"
 #: The command that trains them.
