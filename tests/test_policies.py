@@ -146,7 +146,10 @@ def test_every_graph_node_resets_including_the_untyped_hallway():
 def test_load_default_loads_the_shipped_policies(tiny_dataset):
     policy = policies.load_default(seed=0)
     assert (policy.width, policy.height) == (40, 30) and policy.targets == rooms.GRAPH_NODES
-    assert all(meta["iteration"] == 450 and meta["eval"] for meta in policy.metadata.values())
+    # The cpu preset's 108 k samples continued for 72 k (300 iterations) with starts up to 13 m, evaluated.
+    assert all(meta["iteration"] == 300 and meta["global_step"] == 72_000 and meta["eval"]
+               and meta["train_config"]["init_from"].endswith("policies/cpu")
+               and meta["train_config"]["start_distance"] == 13.0 for meta in policy.metadata.values())
     assert_acts_in_a_fresh_env(policy, tiny_dataset, 120, 90)  # 3x: subsampled
 
 
