@@ -21,8 +21,7 @@ import contextlib
 import dataclasses
 import multiprocessing
 
-#: Backend names of ``--backend``.
-BACKENDS = ("local", "ray")
+from leaps_mj.learning.backend_options import BACKENDS
 
 
 @dataclasses.dataclass(frozen=True)

@@ -51,7 +51,7 @@ import ray
 import torch
 
 from leaps_mj.environment import ray_cluster, vector
-from leaps_mj.learning import nets, rollouts
+from leaps_mj.learning import backend_options, nets, rollouts
 from leaps_mj.learning.policy_config import TrainConfig
 from leaps_mj.learning.training_env import make_training_env
 
@@ -254,7 +254,7 @@ class RayRollouts(ActorGroup):
     def __init__(self, config: TrainConfig, target: str, targets: Sequence[str], network: int,
                  first_iteration: int, workers: int | None = None, address: str | None = None,
                  max_retries: int = 3, timeout_s: float | None = None):
-        rollouts.check_backend("ray", workers, address, config.num_envs)
+        backend_options.check_backend("ray", workers, address, config.num_envs)
         super().__init__(RolloutWorker, config.num_envs, workers, address, max_retries,
                          timeout_s or FRAGMENT_TIMEOUT_S)
         self._args = (config, target, tuple(targets), network)

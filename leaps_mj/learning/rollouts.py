@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import argparse
 import pathlib
 import time
 from typing import Sequence
@@ -40,52 +39,6 @@ from leaps_mj.learning import nets
 from leaps_mj.learning.losses import n_step_returns
 from leaps_mj.learning.policy_config import TrainConfig
 from leaps_mj.learning.training_env import training_houses, training_vector_env
-
-#: Where rollouts run (``--backend``).
-BACKENDS = ("local", "ray")
-
-
-def check_backend(backend: str, num_workers: int | None, ray_address: str | None, num_envs: int,
-                  items: str = "num_envs") -> None:
-    """Refuses rollout options that do not fit together.
-
-    Args:
-      backend: One of :data:`BACKENDS`.
-      num_workers: Ray rollout actors (None: one per cluster CPU); only with "ray".
-      ray_address: Address of a running Ray cluster (None: start a local one); only with "ray".
-      num_envs: How many items the actors share, each holding at least one (the run's
-        environments; the controller trainer's episodes per update).
-      items: Their name in the error.
-
-    Raises:
-      ValueError: naming the bad value and what was expected.
-    """
-    if backend not in BACKENDS:
-        raise ValueError(f"backend {backend!r}: expected one of {list(BACKENDS)}")
-    if backend != "ray":
-        for name, value in (("num_workers", num_workers), ("ray_address", ray_address)):
-            if value is not None:
-                raise ValueError(f"{name} {value!r} needs backend 'ray', not {backend!r}")
-    if num_workers is not None and (isinstance(num_workers, bool) or not isinstance(num_workers, int)
-                                    or not 1 <= num_workers <= num_envs):
-        raise ValueError(f"num_workers {num_workers!r}: expected an integer in [1, {items}={num_envs}]")
-
-
-def add_backend_arguments(parser: argparse.ArgumentParser, what: str, workers_help: str) -> None:
-    """Adds a trainer's ``--backend``, ``--ray-address`` and ``--num-workers`` (checked by :func:`check_backend`).
-
-    Args:
-      parser: The trainer's command.
-      what: What runs on the backend ("rollouts", "training episodes").
-      workers_help: What one Ray actor holds, and the default number of actors.
-    """
-    parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help=f"where {what} run: this machine, or Ray actors (docs/ray.md)")
-    parser.add_argument("--ray-address", default=None,
-                        help="address of a running Ray cluster (with --backend ray; default: start a local one)")
-    parser.add_argument("--num-workers", type=int, default=None,
-                        help=f"Ray actors, {workers_help} (with --backend ray)")
-
 
 @dataclasses.dataclass
 class Unroll:

@@ -52,7 +52,7 @@ import torch
 import tqdm
 
 from leaps_mj.environment import episodes, roomnav
-from leaps_mj.learning import baselines, nets, rollouts
+from leaps_mj.learning import backend_options, baselines, nets
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.planning import agents
 from leaps_mj.world import dataset as dataset_lib
@@ -246,7 +246,7 @@ class Trainer(trainer_lib.Trainer):
     def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True, backend: str = "local",
                  num_workers: int | None = None, ray_address: str | None = None):
         # Each Ray actor plays at least one episode per update.
-        rollouts.check_backend(backend, num_workers, ray_address, config.batch_episodes, "batch_episodes")
+        backend_options.check_backend(backend, num_workers, ray_address, config.batch_episodes, "batch_episodes")
         self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         super().__init__(config, out, config.updates, progress=progress, desc="controller updates")
         self.policy_path = self.out / "controller.pt"
@@ -364,7 +364,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more updates (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    rollouts.add_backend_arguments(parser, "training episodes", "each playing batch_episodes / N episodes per "
+    backend_options.add_backend_arguments(parser, "training episodes", "each playing batch_episodes / N episodes per "
                                    "update (default: one per cluster CPU, at most batch_episodes)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):

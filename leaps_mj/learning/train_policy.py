@@ -70,7 +70,7 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from leaps_mj.learning import nets, policies, rollouts
+from leaps_mj.learning import backend_options, nets, policies, rollouts
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.learning.losses import a2c_loss, aux_loss, bc_loss, masked_mean
 from leaps_mj.learning.policy_config import PRESETS, TrainConfig
@@ -110,7 +110,7 @@ class Trainer(trainer_lib.Trainer):
     def __init__(self, config: TrainConfig, target: str, out: str | os.PathLike, device: str = "cpu",
                  progress: bool = True, targets: Sequence[str] = rooms.GRAPH_NODES, backend: str = "local",
                  num_workers: int | None = None, ray_address: str | None = None):
-        rollouts.check_backend(backend, num_workers, ray_address, config.num_envs)
+        backend_options.check_backend(backend, num_workers, ray_address, config.num_envs)
         if (target == SHARED) != config.shared:
             raise ValueError(f"target {target!r} with shared={config.shared}: a shared run trains target "
                              f"{SHARED!r}, a per-target run one of {list(rooms.GRAPH_NODES)}")
@@ -366,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop each target after this many more iterations (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    rollouts.add_backend_arguments(parser, "rollouts", "each holding num_envs / N environments (default: one per "
+    backend_options.add_backend_arguments(parser, "rollouts", "each holding num_envs / N environments (default: one per "
                                    "cluster CPU, at most num_envs)")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):

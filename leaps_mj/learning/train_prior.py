@@ -43,7 +43,7 @@ import numpy as np
 
 from leaps_mj.environment import roomnav
 from leaps_mj.environment.roomnav import EpisodeSpec
-from leaps_mj.learning import rollouts
+from leaps_mj.learning import backend_options
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.planning import semantic
 from leaps_mj.world import dataset as dataset_lib
@@ -215,7 +215,7 @@ class Trainer(trainer_lib.Trainer):
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers {workers!r}: expected a positive integer")
         self.house_ids = [p.stem for p in dataset_lib.list_houses(config.dataset, config.split)][: config.houses]
-        rollouts.check_backend(backend, num_workers, ray_address, len(self.house_ids), "houses")
+        backend_options.check_backend(backend, num_workers, ray_address, len(self.house_ids), "houses")
         self.backend, self.num_workers, self.ray_address = backend, num_workers, ray_address
         super().__init__(config, out, len(self.house_ids), state_name="state.json", progress=progress,
                          desc="prior: houses")
@@ -307,7 +307,7 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=int, default=None, help="runs per present room type per house")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--workers", type=int, default=1, help="worker processes (local backend)")
-    rollouts.add_backend_arguments(p, "houses' explorations", "each exploring one house at a time (default: one per "
+    backend_options.add_backend_arguments(p, "houses' explorations", "each exploring one house at a time (default: one per "
                                    "cluster CPU, at most one per house)")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("dataset", args.dataset), ("houses", args.houses),

@@ -41,7 +41,7 @@ DEFAULT_PRIOR = "cpu"
 #: The shipped prior the commands give LEAPS with each kind of sub-policy: the same learned
 #: connectivity, with the observation noise tuned on the validation episodes for that sub-policy
 #: (``python -m leaps_mj.train obs-noise --subpolicy local|learned``): ψ_obs reflects how reliable the
-#: sub-policies are (docs/training.md, "ψ_obs for the learned sub-policies").
+#: sub-policies are (results/obs_noise_learned_v2.md).
 SUBPOLICY_PRIORS = {"local": DEFAULT_PRIOR, "learned": "cpu_learned"}
 #: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.planning.semantic.SemanticModel`).
 RULES = ("paper", "release")
