@@ -305,3 +305,14 @@ def test_previous_action_column_is_the_action_taken_one_step_before(tiny_dataset
     train_policy.run_target(config, "kitchen", tmp_path, progress=False)
     policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",))
     assert policy.nets["kitchen"].config.prev_action
+
+
+def test_bc_coef_keeps_the_teachers_labels_and_their_loss_in_a2c(tiny_dataset, tmp_path):
+    """A2C labels its states with the teacher only when the imitation anchor is on, and logs its cross-entropy."""
+    assert not tiny(tiny_dataset, method="a2c").labelled
+    config = tiny(tiny_dataset, method="a2c", bc_coef=0.5, total_steps=2 * 16)
+    assert config.labelled
+    train_policy.Trainer(config, "kitchen", tmp_path, progress=False).train()
+    log = policy_eval.read_progress(tmp_path / "kitchen" / "progress.csv")
+    assert list(log["phase"]) == ["a2c", "a2c"]
+    assert np.isfinite(log["bc_cross_entropy"]).all() and np.isfinite(log["expert_agreement"]).all()
