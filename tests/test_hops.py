@@ -157,13 +157,7 @@ def test_a_partial_checkpoint_folder_runs_on_its_nodes(hop_dataset, tmp_path, ca
 def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys):
     """tools/hop_actions.py: the observable teacher rarely reverses a turn; bad counts are refused."""
     dataset = hop_dataset[0]
-    import importlib.util
-    import pathlib
-
-    path = pathlib.Path(__file__).resolve().parents[1] / "tools" / "hop_actions.py"
-    spec = importlib.util.spec_from_file_location("hop_actions", path)
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    tool = _load_tool("hop_actions")
     assert tool.main(["--dataset", str(dataset), "--agent", "observable", "--every", "1", "--limit", "4"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("4 one-door hop episodes") and "action shares:" in out
@@ -171,3 +165,37 @@ def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys):
     assert turns == 0 or reversed_ / turns < 0.25
     with pytest.raises(SystemExit):
         tool.main(["--dataset", str(dataset), "--every", "0"])
+
+
+def _load_tool(name: str):
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool
+
+
+def test_hop_curve_tool_plots_shipped_results(tmp_path, capsys, monkeypatch):
+    """tools/hop_curve.py plots committed hop results; it refuses bad specs and runs of other episodes."""
+    import pathlib
+
+    tool = _load_tool("hop_curve")
+    out = tmp_path / "curve.png"
+    results = pathlib.Path(__file__).resolve().parents[1] / "results"
+    monkeypatch.chdir(results.parent)   # the printed table names the folders as given
+    assert tool.main(["--run", "cpu=108000=results/hops_shipped_v2_test",
+                      "--run", "cpu=180000=results/hops_shipped180k_v2_test", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert out.stat().st_size > 10_000
+    assert "| cpu (results/hops_shipped_v2_test) | 108,000 | 23.7 | 40.4 | 3.3 | 8.9 |" in printed
+    for bad in ("cpu=x=results/hops_shipped_v2_test", "cpu=1000=results/no_such_folder", "cpu=1000"):
+        with pytest.raises(SystemExit):
+            tool.main(["--run", bad, "--out", str(out)])
+    assert "expected LABEL=SAMPLES=FOLDER" in capsys.readouterr().err
+    with pytest.raises(SystemExit):   # test and valid episodes do not share a plot
+        tool.main(["--run", "a=1=results/hops_shipped_v2_test", "--run", "b=2=results/hops_shipped_v2_valid",
+                   "--out", str(out)])
+    assert "ran other episodes" in capsys.readouterr().err
