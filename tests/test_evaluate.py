@@ -9,6 +9,7 @@ import pytest
 import leaps_mj
 from leaps_mj.environment import episodes
 from leaps_mj.evaluation import harness as evaluate
+from leaps_mj.evaluation import stats
 from leaps_mj.planning import agents
 
 
@@ -49,15 +50,15 @@ def test_run_episode_reports_and_calls_the_observer(tiny_dataset):
 
 def test_success_at_smaller_horizons_is_derived_from_the_success_step():
     rows = [{"success_step": 5}, {"success_step": None}, {"success_step": 50}]
-    assert evaluate.success_at(rows, 10).tolist() == [True, False, False]
-    assert evaluate.success_at(rows, 50).tolist() == [True, False, True]
+    assert stats.success_at(rows, 10).tolist() == [True, False, False]
+    assert stats.success_at(rows, 50).tolist() == [True, False, True]
 
 
 def test_wilson_interval():
-    low, high = evaluate.wilson(5, 10)
+    low, high = stats.wilson(5, 10)
     assert (low, high) == pytest.approx((0.2366, 0.7634), abs=1e-4)
-    assert evaluate.wilson(0, 20)[0] == 0.0
-    assert np.isnan(evaluate.wilson(0, 0)[0])
+    assert stats.wilson(0, 20)[0] == 0.0
+    assert np.isnan(stats.wilson(0, 0)[0])
 
 
 def test_select_episodes_is_stratified_and_seeded(tiny_dataset):
@@ -87,6 +88,12 @@ def test_main_writes_csvs_table_plots_and_resumes(tiny_dataset, tmp_path, monkey
         assert all(int(r["steps"]) <= 60 for r in rows)
     table = (out / "results.md").read_text()
     assert "| oracle |" in table and "H = 20" in table and "Relative improvement" in table
+    assert "## Paired: leaps against pure on the same episodes" in table
+    rows = {label: evaluate.read_rows(evaluate.csv_path(out, label)) for label in ("leaps", "pure")}
+    test = stats.paired_test(stats.success_at(rows["leaps"], 60), stats.success_at(rows["pure"], 60))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["paired"]["leaps"]["pure"]["60"]["all"] == test
+    assert set(summary["paired"]["leaps"]) == {"random", "pure"}   # baselines only, not the oracle
     for name in ("success_vs_plan_length.png", "success_vs_metres.png", "relative_improvement.png"):
         assert (out / name).stat().st_size > 10_000
     assert "| leaps |" in capsys.readouterr().out

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from leaps_mj.environment import episodes
-from leaps_mj.evaluation import harness, hops
+from leaps_mj.evaluation import harness, hops, stats
 from leaps_mj.learning import policies
 from leaps_mj.world import rooms
 
@@ -68,12 +68,12 @@ def test_bad_arguments_name_the_value(hop_dataset):
 
 
 def test_paired_test_is_the_exact_sign_test():
-    t = harness.paired_test(np.array([1, 1, 1, 1, 1, 1, 1, 0]), np.array([0, 0, 0, 0, 0, 0, 1, 1]))
+    t = stats.paired_test(np.array([1, 1, 1, 1, 1, 1, 1, 0]), np.array([0, 0, 0, 0, 0, 0, 1, 1]))
     assert (t["n"], t["a"], t["b"], t["a_only"], t["b_only"]) == (8, 7, 2, 6, 1)
     assert t["p"] == pytest.approx(0.125)  # 2 * P(X <= 1), X ~ Binomial(7, 1/2)
-    assert harness.paired_test(np.ones(3), np.ones(3))["p"] == 1.0
+    assert stats.paired_test(np.ones(3), np.ones(3))["p"] == 1.0
     with pytest.raises(ValueError, match="shapes"):
-        harness.paired_test(np.ones(3), np.ones(2))
+        stats.paired_test(np.ones(3), np.ones(2))
 
 
 def test_new_config_fields_keep_old_result_folders_valid(tmp_path):

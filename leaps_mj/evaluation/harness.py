@@ -21,7 +21,9 @@ Outputs in ``--out``:
   every chunk of episodes, so an interrupted run resumes where it stopped
   (episodes already in the CSV are skipped).
 * ``results.md`` and ``summary.json``: success rate with a 95% Wilson
-  binomial interval per agent and horizon, overall and by plan length.
+  binomial interval per agent and horizon, overall and by plan length, and
+  each LEAPS agent paired with each baseline on the same episodes (exact
+  McNemar test, :func:`leaps_mj.evaluation.stats.paired_comparisons`).
 * ``success_vs_plan_length.png``, ``success_vs_metres.png``,
   ``relative_improvement.png``: the paper's Fig. 4-style plots.
 
@@ -56,12 +58,11 @@ import pathlib
 import sys
 
 import numpy as np
-import scipy.stats
 import tqdm
 
 from leaps_mj.environment import episodes as episodes_lib
 from leaps_mj.environment import roomnav
-from leaps_mj.evaluation import backends, registry
+from leaps_mj.evaluation import backends, registry, stats
 from leaps_mj.planning import agents as agents_lib
 from leaps_mj.planning import semantic
 from leaps_mj.records import recorder as record_lib
@@ -418,48 +419,6 @@ def run(config: EvalConfig, agent_specs, indices, out: pathlib.Path, workers: in
 # -- statistics ------------------------------------------------------------------
 
 
-def success_at(rows: list[dict], horizon: int) -> np.ndarray:
-    """Per-episode success within ``horizon`` steps, derived from the success steps."""
-    return np.array([r["success_step"] is not None and r["success_step"] <= horizon for r in rows], dtype=bool)
-
-
-def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion ((nan, nan) when n = 0)."""
-    if n == 0:
-        return math.nan, math.nan
-    ci = scipy.stats.binomtest(int(successes), int(n)).proportion_ci(confidence, method="wilson")
-    return float(ci.low), float(ci.high)
-
-
-def paired_test(a: np.ndarray, b: np.ndarray) -> dict:
-    """Exact McNemar (sign) test of two agents' successes on the same episodes.
-
-    Only the discordant episodes count: under "no difference" each is as
-    likely to be won by either agent, so their split is Binomial(n, 1/2).
-
-    Returns:
-      ``{"n", "a", "b", "a_only", "b_only", "p"}``: episodes, successes of each,
-      episodes only one of them solved, and the two-sided p-value (1 without discordant episodes).
-
-    Raises:
-      ValueError: if the arrays differ in shape.
-    """
-    a, b = np.asarray(a, dtype=bool), np.asarray(b, dtype=bool)
-    if a.shape != b.shape:
-        raise ValueError(f"paired successes of shapes {a.shape} and {b.shape}: expected the same episodes")
-    a_only, b_only = int((a & ~b).sum()), int((b & ~a).sum())
-    p = scipy.stats.binomtest(a_only, a_only + b_only, 0.5).pvalue if a_only + b_only else 1.0
-    return {"n": int(a.size), "a": int(a.sum()), "b": int(b.sum()), "a_only": a_only, "b_only": b_only,
-            "p": float(p)}
-
-
-def rate(mask: np.ndarray) -> dict:
-    """``{"n", "successes", "rate", "low", "high"}`` of a boolean array."""
-    n, k = int(mask.size), int(mask.sum())
-    low, high = wilson(k, n)
-    return {"n": n, "successes": k, "rate": k / n if n else math.nan, "low": low, "high": high}
-
-
 def metre_bins(distances) -> np.ndarray:
     """Edges (whole metres) of up to :data:`MAX_METRE_BINS` bins holding about equal numbers of episodes."""
     d = np.asarray([v for v in distances if v is not None], dtype=float)
@@ -488,11 +447,11 @@ def summarize(table: dict[str, list[dict]], horizons) -> dict:
         bins = np.digitize(dist, edges[1:-1])
         out[label] = {}
         for h in horizons:
-            s = success_at(rows, h)
+            s = stats.success_at(rows, h)
             out[label][str(h)] = {
-                "all": rate(s),
-                "plan_length": {int(L): rate(s[lengths == L]) for L in sorted(set(lengths.tolist()))},
-                "metres": {names[b]: rate(s[np.isfinite(dist) & (bins == b)]) for b in range(len(names))},
+                "all": stats.rate(s),
+                "plan_length": {int(L): stats.rate(s[lengths == L]) for L in sorted(set(lengths.tolist()))},
+                "metres": {names[b]: stats.rate(s[np.isfinite(dist) & (bins == b)]) for b in range(len(names))},
             }
     return out
 
@@ -510,12 +469,16 @@ def relative_improvement(summary: dict, leaps: str, baseline: str, horizon: int)
 # -- report -------------------------------------------------------------------------
 
 
+def _paired_cell(t: dict) -> str:
+    return f"{100 * (t['a'] - t['b']) / t['n']:+.1f} ({t['a_only']}/{t['b_only']}, p = {t['p']:.2g})"
+
+
 def _cell(r: dict) -> str:
     return f"{100 * r['rate']:.1f}% [{100 * r['low']:.1f}, {100 * r['high']:.1f}] (n={r['n']})"
 
 
-def markdown(summary: dict, horizons, config: EvalConfig, n_episodes: int) -> str:
-    """The results as markdown tables."""
+def markdown(summary: dict, horizons, config: EvalConfig, n_episodes: int, paired: dict | None = None) -> str:
+    """The results as markdown tables (with ``paired``, those of :func:`paired_comparisons` too)."""
     labels = list(summary)
     lines = [
         f"# RoomNav evaluation: {config.dataset} / {config.split}",
@@ -549,6 +512,18 @@ def markdown(summary: dict, horizons, config: EvalConfig, n_episodes: int) -> st
                 cells = [relative_improvement(summary, a, b, h)["all"] for h in horizons]
                 lines.append(f"| {a} | {b} | " + " | ".join(
                     "n/a (baseline 0)" if math.isnan(c) else f"{100 * c:+.0f}%" for c in cells) + " |")
+    for a, per_base in (paired or {}).items():
+        for b, per_h in per_base.items():
+            lengths = sorted({L for t in per_h.values() for L in t["plan_length"]})
+            lines += ["", f"## Paired: {a} against {b} on the same episodes",
+                      "", "Success difference in points (episodes only LEAPS / only the baseline solved, "
+                      "two-sided exact McNemar p).", "",
+                      "| H | all | " + " | ".join(f"L = {L}" for L in lengths) + " |",
+                      "|---|---|" + "---|" * len(lengths)]
+            for h in horizons:
+                t = per_h[str(h)]
+                lines.append(f"| {h} | {_paired_cell(t['all'])} | " + " | ".join(
+                    _paired_cell(t["plan_length"][L]) if L in t["plan_length"] else "-" for L in lengths) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -611,11 +586,12 @@ def plot(summary: dict, horizons, out: pathlib.Path) -> list[pathlib.Path]:
 def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: pathlib.Path) -> dict:
     """Writes ``results.md``, ``summary.json`` and the plots; returns the summary."""
     summary = summarize(table, horizons)
+    paired = stats.paired_comparisons(table, horizons, BASELINES)
     n = max((len(rows) for rows in table.values()), default=0)
-    dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, n).encode())
+    dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, n, paired).encode())
     dataset_lib.write_atomic(out / "summary.json", (json.dumps(
-        {"config": config.to_json(), "horizons": list(horizons), "episodes": n, "success": summary},
-        indent=1) + "\n").encode())
+        {"config": config.to_json(), "horizons": list(horizons), "episodes": n, "success": summary,
+         "paired": paired}, indent=1) + "\n").encode())
     plot(summary, horizons, out)
     return summary
 

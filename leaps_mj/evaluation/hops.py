@@ -42,7 +42,7 @@ import sys
 import numpy as np
 
 from leaps_mj.environment import episodes as episodes_lib
-from leaps_mj.evaluation import backends, harness
+from leaps_mj.evaluation import backends, harness, stats
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import rooms
 
@@ -82,15 +82,15 @@ def summarize(table: dict[str, list[dict]], horizons) -> dict:
 
     Returns:
       ``{label: {str(H): {str(d): {"all": rate, "node": {node: rate}}}}}`` (rates of
-      :func:`leaps_mj.evaluation.harness.rate`; nodes without episodes left out).
+      :func:`leaps_mj.evaluation.stats.rate`; nodes without episodes left out).
     """
     out = {}
     for label, rows in table.items():
         groups = _groups(rows)
         out[label] = {}
         for h in horizons:
-            s = harness.success_at(rows, h)
-            out[label][str(h)] = _per_group(groups, lambda m, s=s: harness.rate(s[m]))
+            s = stats.success_at(rows, h)
+            out[label][str(h)] = _per_group(groups, lambda m, s=s: stats.rate(s[m]))
     return out
 
 
@@ -135,7 +135,7 @@ def load_baseline(folder: pathlib.Path, config: harness.EvalConfig, rows: list[d
 
 
 def compare(rows: list[dict], base: list[dict], horizons) -> dict:
-    """Paired test (:func:`leaps_mj.evaluation.harness.paired_test`, a = this run, b = the baseline).
+    """Paired test (:func:`leaps_mj.evaluation.stats.paired_test`, a = this run, b = the baseline).
 
     Returns:
       ``{str(H): {str(d): {"all": test, "node": {node: test}}}}``.
@@ -143,8 +143,8 @@ def compare(rows: list[dict], base: list[dict], horizons) -> dict:
     groups = _groups(rows)
     out = {}
     for h in horizons:
-        a, b = harness.success_at(rows, h), harness.success_at(base, h)
-        out[str(h)] = _per_group(groups, lambda m, a=a, b=b: harness.paired_test(a[m], b[m]))
+        a, b = stats.success_at(rows, h), stats.success_at(base, h)
+        out[str(h)] = _per_group(groups, lambda m, a=a, b=b: stats.paired_test(a[m], b[m]))
     return out
 
 
