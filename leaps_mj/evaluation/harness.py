@@ -469,6 +469,12 @@ def relative_improvement(summary: dict, leaps: str, baseline: str, horizon: int)
 # -- report -------------------------------------------------------------------------
 
 
+def compared(labels) -> tuple[list[str], list[str]]:
+    """The LEAPS agents among ``labels`` (``leaps*``) and the baselines they are compared with."""
+    return ([label for label in labels if label.startswith("leaps")],
+            [label for label in labels if label in BASELINES])
+
+
 def _paired_cell(t: dict) -> str:
     return f"{100 * (t['a'] - t['b']) / t['n']:+.1f} ({t['a_only']}/{t['b_only']}, p = {t['p']:.2g})"
 
@@ -478,7 +484,7 @@ def _cell(r: dict) -> str:
 
 
 def markdown(summary: dict, horizons, config: EvalConfig, n_episodes: int, paired: dict | None = None) -> str:
-    """The results as markdown tables (with ``paired``, those of :func:`paired_comparisons` too)."""
+    """The results as markdown tables, with the paired tests of :func:`stats.paired_comparisons` when given."""
     labels = list(summary)
     lines = [
         f"# RoomNav evaluation: {config.dataset} / {config.split}",
@@ -501,8 +507,7 @@ def markdown(summary: dict, horizons, config: EvalConfig, n_episodes: int, paire
         for label in labels:
             per = summary[label][str(h)]["plan_length"]
             lines.append(f"| {label} | " + " | ".join(_cell(per[L]) if L in per else "-" for L in lengths) + " |")
-    leaps = [label for label in labels if label.startswith("leaps")]
-    bases = [label for label in labels if label in BASELINES]
+    leaps, bases = compared(labels)
     if leaps and bases:
         lines += ["", "## Relative improvement of LEAPS, (LEAPS - baseline) / baseline", "",
                   "| LEAPS | baseline | " + " | ".join(f"H = {h}" for h in horizons) + " |",
@@ -558,8 +563,7 @@ def plot(summary: dict, horizons, out: pathlib.Path) -> list[pathlib.Path]:
         axes[0][-1].legend(fontsize=8)
         topdown.save_figure(fig, out / name)
         paths.append(out / name)
-    leaps = [label for label in labels if label.startswith("leaps")]
-    bases = [label for label in labels if label in BASELINES]
+    leaps, bases = compared(labels)
     if leaps and bases:
         # One row per baseline: improvements over random dwarf those over pure.
         fig, axes = plt.subplots(len(bases), len(horizons), figsize=(4.6 * len(horizons), 3.4 * len(bases)),
@@ -586,7 +590,7 @@ def plot(summary: dict, horizons, out: pathlib.Path) -> list[pathlib.Path]:
 def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: pathlib.Path) -> dict:
     """Writes ``results.md``, ``summary.json`` and the plots; returns the summary."""
     summary = summarize(table, horizons)
-    paired = stats.paired_comparisons(table, horizons, BASELINES)
+    paired = stats.paired_comparisons(table, horizons, *compared(table))
     n = max((len(rows) for rows in table.values()), default=0)
     dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, n, paired).encode())
     dataset_lib.write_atomic(out / "summary.json", (json.dumps(

@@ -55,8 +55,8 @@ def rate(mask: np.ndarray) -> dict:
     return {"n": n, "successes": k, "rate": k / n if n else math.nan, "low": low, "high": high}
 
 
-def paired_comparisons(table: dict[str, list[dict]], horizons, baselines) -> dict:
-    """Each LEAPS agent (labels ``leaps*``) against each of ``baselines`` in ``table`` on their common episodes.
+def paired_comparisons(table: dict[str, list[dict]], horizons, leaps, baselines) -> dict:
+    """Each of the ``leaps`` agents against each of the ``baselines`` on their common episodes.
 
     Success rates with overlapping intervals can still differ: every agent ran
     the same episodes with the same seeds, so the exact McNemar test on the
@@ -67,15 +67,15 @@ def paired_comparisons(table: dict[str, list[dict]], horizons, baselines) -> dic
       with the dicts of :func:`paired_test` (``a`` = LEAPS, ``b`` = the baseline).
     """
     out = {}
-    for a in (label for label in table if label.startswith("leaps")):
-        for b in (label for label in table if label in baselines):
-            rows_a = {int(r["episode"]): r for r in table[a]}
-            rows_b = {int(r["episode"]): r for r in table[b]}
+    for a in leaps:
+        for b in baselines:
+            rows_a = {r["episode"]: r for r in table[a]}
+            rows_b = {r["episode"]: r for r in table[b]}
             common = sorted(set(rows_a) & set(rows_b))
             if not common:
                 continue
             ra, rb = [rows_a[e] for e in common], [rows_b[e] for e in common]
-            lengths = np.array([int(r["plan_length"]) for r in ra])
+            lengths = np.array([r["plan_length"] or 0 for r in ra])   # as the harness's summary counts them
             per_h = {}
             for h in horizons:
                 sa, sb = success_at(ra, h), success_at(rb, h)
