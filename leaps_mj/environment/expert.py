@@ -66,9 +66,23 @@ class GeodesicExpert:
         self.lookahead = lookahead
         self._safe: dict[str, navgrid.NavGrid] = {}
         self._fields: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._episode = None  # the episode of the last new_episode() call, and its step
+        self._steps = -1
 
     def reset(self) -> None:
         """Nothing to forget between episodes beyond the per-house cache."""
+
+    def new_episode(self) -> bool:
+        """Whether the environment's current step belongs to another episode than at the last call.
+
+        For experts with a per-episode memory: the sub-policy trainer calls
+        :meth:`act` every step without calling :meth:`reset`, so a new episode
+        is detected from the task's episode spec (identity) and step counter.
+        """
+        task = self.env.task
+        fresh = task.episode is not self._episode or task.steps < self._steps
+        self._episode, self._steps = task.episode, task.steps
+        return fresh
 
     def _safe_grid(self, hm):
         """The house's grid at a wider radius: paths keep off walls and corners."""

@@ -31,9 +31,10 @@ the episode so far:
   :data:`DOOR_PATIENCE` steps, is done, so it does not loop. With nothing
   left to explore it falls back on the geodesic expert.
 
-The memory is per episode: a new episode is detected from the task's
-episode spec (identity) and step counter, since the sub-policy trainer calls
-:meth:`ObservableExpert.act` every step without calling ``reset``.
+The memory is per episode: a new episode is detected by
+:meth:`leaps_mj.environment.expert.GeodesicExpert.new_episode`, since the
+sub-policy trainer calls :meth:`ObservableExpert.act` every step without
+calling ``reset``.
 """
 
 from __future__ import annotations
@@ -72,8 +73,6 @@ class ObservableExpert(expert.GeodesicExpert):
 
     def __init__(self, env, seed: int = 0, lookahead: float = 0.6):
         super().__init__(env, seed=seed, lookahead=lookahead)
-        self._episode = None
-        self._steps = -1
         # Fields of the current house only (door walks, subsets of target rooms): bounded memory.
         self._house_id: str | None = None
         self._house_fields: dict[tuple, tuple] = {}
@@ -91,10 +90,8 @@ class ObservableExpert(expert.GeodesicExpert):
     def observe(self) -> None:
         """Adds the current step to the memory, starting afresh at a new episode."""
         task = self.env.task
-        if task.episode is not self._episode or task.steps < self._steps:
-            self._episode = task.episode
+        if self.new_episode():
             self.reset()
-        self._steps = task.steps
         hm = task.house_model
         room = hm.room_at(self.env.physics.agent_pose()[:2])
         if room >= 0:

@@ -101,6 +101,7 @@ AGENTS = {
     "aug": AgentSpec("aug", "aug"),
     "oracle": AgentSpec("oracle", "oracle"),
     "oracle-scan": AgentSpec("oracle-scan", "oracle-scan"),
+    "oracle-look": AgentSpec("oracle-look", "oracle-look"),
     "observable": AgentSpec("observable", "observable"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.

@@ -9,13 +9,14 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from leaps_mj.environment import expert, observable_expert
+from leaps_mj.environment import expert, looking_expert, observable_expert
 from leaps_mj.learning import nets
 from leaps_mj.world import dataset as dataset_lib
 
 METHODS = ("a2c", "dagger", "dagger+a2c")
 #: DAgger teachers by name: the map-reading geodesic expert, or the one acting only on what was observed.
 TEACHERS = {"geodesic": expert.GeodesicExpert, "geodesic-scan": expert.ScanningGeodesicExpert,
+            "geodesic-look": looking_expert.LookingGeodesicExpert,
             "observable": observable_expert.ObservableExpert}
 
 
@@ -52,7 +53,9 @@ class TrainConfig:
         :data:`TEACHERS`): "geodesic" (reads the map, so some of its choices
         cannot be known from the frames), "geodesic-scan" (the same, but
         turning left whenever the way is out of view,
-        :class:`leaps_mj.environment.expert.ScanningGeodesicExpert`) or
+        :class:`leaps_mj.environment.expert.ScanningGeodesicExpert`), "geodesic-look"
+        (the same, but first looking around each room until the target is
+        seen, :class:`leaps_mj.environment.looking_expert.LookingGeodesicExpert`) or
         "observable" (chooses from the
         rooms seen and the doors passed so far,
         :class:`leaps_mj.environment.observable_expert.ObservableExpert`).

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, observable_expert
+from leaps_mj.environment import expert, looking_expert, observable_expert
 from leaps_mj.planning import semantic
 from leaps_mj.world import rooms
 
@@ -171,6 +171,15 @@ class ScanningOracleAgent(OracleAgent):
 
     name = "oracle-scan"
     expert_class = expert.ScanningGeodesicExpert
+
+
+class LookingOracleAgent(OracleAgent):
+    """The geodesic expert looking around each room until the target is seen
+    (:class:`leaps_mj.environment.looking_expert.LookingGeodesicExpert`): the ``geodesic-look`` teacher, as an agent.
+    """
+
+    name = "oracle-look"
+    expert_class = looking_expert.LookingGeodesicExpert
 
 
 class ObservableAgent(OracleAgent):
