@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from leaps_mj.environment import episodes
+from leaps_mj.environment import episodes, roomnav
 from leaps_mj.evaluation import harness, hops, stats
 from leaps_mj.learning import policies
 from leaps_mj.world import rooms
@@ -199,3 +199,28 @@ def test_hop_curve_tool_plots_shipped_results(tmp_path, capsys, monkeypatch):
         tool.main(["--run", "a=1=results/hops_shipped_v2_test", "--run", "b=2=results/hops_shipped_v2_valid",
                    "--out", str(out)])
     assert "ran other episodes" in capsys.readouterr().err
+
+
+def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(hop_dataset, tmp_path, capsys):
+    """tools/hop_visibility.py: groups cover the one-door hops; a target in the first frame is in view on turning;
+    folders of other episodes are refused."""
+    dataset, eps, _ = hop_dataset
+    tool = _load_tool("hop_visibility")
+    group_of = tool.groups(str(dataset), "test", 1)
+    assert set(group_of) == {i for i, s in enumerate(eps) if s.plan_length == 1}
+    assert set(group_of.values()) <= set(tool.GROUPS)
+    env = roomnav.load(str(dataset), "test", width=40, height=30)
+    for i in group_of:
+        if rooms.SEE_OBJECTS.get(eps[i].target) and env.reset_to(eps[i]) and env.task.target_fraction > 0:
+            assert group_of[i] == tool.GROUPS[0]
+        elif not rooms.SEE_OBJECTS.get(eps[i].target):
+            assert group_of[i] == tool.GROUPS[2]
+    env.close()
+    assert hops.main(["--dataset", str(dataset), "--split", "test", "--agent", "oracle", "--out", str(tmp_path / "run"),
+                      "--no-progress"]) == 0
+    capsys.readouterr()
+    assert tool.main(["--dataset", str(dataset), "--split", "test", str(tmp_path / "run")]) == 0
+    out = capsys.readouterr().out
+    assert f"{len(group_of)} hop episodes 1 door(s) away" in out and "| oracle |" in out
+    assert tool.main(["--dataset", str(dataset), "--split", "valid", str(tmp_path / "run")]) == 2
+    assert "expected the hop episodes of" in capsys.readouterr().err
