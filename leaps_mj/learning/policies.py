@@ -39,9 +39,13 @@ TRAIN_COMMAND = ("python -m leaps_mj.train policy --preset cpu --target all --ou
                  f"cp runs/policy_cpu_cont/*.pt {DEFAULT_DIR}/")
 #: Folder of the shipped semantic-augmented policies μ_s (cpu preset, the 8 room types).
 AUGMENTED_DIR = DEFAULT_DIR.parent / "aug_cpu"
-#: The command that trains them.
+#: The commands that train them: the sub-policies' recipe (108 k samples a target, then 72 k more with
+#: starts up to 13 m from the first iteration; session 7).
 AUGMENTED_TRAIN_COMMAND = ("python -m leaps_mj.train policy --preset cpu --use-semantic true --target all "
-                           f"--out runs/policy_aug_cpu && cp runs/policy_aug_cpu/*.pt {AUGMENTED_DIR}/")
+                           "--out runs/policy_aug_cpu && "
+                           "python -m leaps_mj.train policy --preset cpu --use-semantic true --target all "
+                           "--init-from runs/policy_aug_cpu --start-distance 13 --total-steps 72000 "
+                           f"--out runs/policy_aug_cpu_cont && cp runs/policy_aug_cpu_cont/*.pt {AUGMENTED_DIR}/")
 
 
 class LearnedSubPolicy:
