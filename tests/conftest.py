@@ -20,6 +20,13 @@ def tiny_dataset(tmp_path_factory) -> pathlib.Path:
     return out
 
 
+@pytest.fixture(scope="session")
+def hop_episodes(tiny_dataset):
+    """Starts 1 and 2 doors from each node in the tiny test houses (kept in memory, no file written)."""
+    eps, _ = episodes.generate_hops(str(tiny_dataset), "test", per_node=2, seed=0)
+    return eps
+
+
 @pytest.fixture(scope="module")
 def ray_local():
     """One small local Ray instance (2 CPUs, no dashboard, workers' logs kept off the terminal) per test module."""

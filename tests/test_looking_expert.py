@@ -1,5 +1,6 @@
 """Tests of the looking expert: it turns left until the target is seen or the room looked around,
-then acts as the geodesic expert; memory per episode; hop success; its use as a DAgger teacher."""
+then acts as the geodesic expert; memory per episode; its use as a DAgger teacher; and the hop success
+of the teachers that act on what was observed (looking, observable)."""
 
 import dataclasses
 import math
@@ -19,13 +20,6 @@ def env(tiny_dataset):
     e = roomnav.load(str(tiny_dataset), "test", reward="sparse", horizon=100)
     yield e
     e.close()
-
-
-@pytest.fixture(scope="module")
-def hop_episodes(tiny_dataset):
-    """Starts 1 and 2 doors from each node in the tiny test houses (kept in memory, no file written)."""
-    eps, _ = episodes.generate_hops(str(tiny_dataset), "test", per_node=2, seed=0)
-    return eps
 
 
 def _unseen_start(env, hop_episodes):
@@ -96,10 +90,13 @@ def test_targets_without_see_objects_get_the_geodesic_experts_actions(env, hop_e
     assert runs[0] == runs[1]
 
 
-def test_it_reaches_the_target_from_most_hop_starts(env, hop_episodes):
+@pytest.mark.parametrize("name", ["oracle-look", "observable"])
+def test_the_teachers_reach_the_target_from_most_hop_starts(env, hop_episodes, name):
+    """The looking and the observable teachers, as agents (the observable one, measured on these 32 episodes:
+    all 1-door starts within 49 steps, all 2-door ones within 80)."""
     steps = {1: [], 2: []}
     for k, spec in enumerate(hop_episodes):
-        result = episodes.run_episode(env, registry.make_agent("oracle-look", env, seed=k), spec, 100)
+        result = episodes.run_episode(env, registry.make_agent(name, env, seed=k), spec, 100)
         steps[spec.plan_length].append(result["success_step"])
     one, two = steps[1], steps[2]
     assert len(one) >= 12 and len(two) >= 12
