@@ -66,6 +66,12 @@ class PolicyConfig:
         frame shows (from the frame features), the room-type bits of where
         the agent stands and the geodesic distance to the target (from the
         LSTM state).
+      map_input: Also read the egocentric top-down map the agent builds from
+        its own frames and pose (``egomap``,
+        :class:`leaps_mj.environment.mapping.EgoMapper`) through a small CNN
+        whose features join the LSTM input and the heads' input: memory of
+        where the target's objects, the doors and the visited cells lie,
+        which the plain LSTM did not learn to keep.
       num_classes: Number of segmentation classes.
       num_actions: Number of discrete actions.
     """
@@ -83,6 +89,7 @@ class PolicyConfig:
     target_input: bool = False
     prev_action: bool = False
     aux: bool = False
+    map_input: bool = False
     num_classes: int = rooms.NUM_SEG_CLASSES
     num_actions: int = rooms.NUM_ACTIONS
 
@@ -92,7 +99,7 @@ class PolicyConfig:
         _check_positive_tuple("conv_channels", self.conv_channels)
         for name in ("kernel", "stride", "hidden", "lstm", "num_actions"):
             _check_positive(name, getattr(self, name))
-        for name in ("use_semantic", "target_input", "prev_action", "aux"):
+        for name in ("use_semantic", "target_input", "prev_action", "aux", "map_input"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
 

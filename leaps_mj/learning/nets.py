@@ -10,7 +10,8 @@ Three networks, each built from a frozen config dataclass (defined in
   which also sees the room-type bits and the target one-hot. With
   ``target_input=True`` one network serves every graph node (it reads the
   node's one-hot, ``node``); with ``aux=True`` it has auxiliary heads that
-  only training reads (:meth:`ActorCritic.aux_outputs`).
+  only training reads (:meth:`ActorCritic.aux_outputs`); with
+  ``map_input=True`` it also reads the agent's egocentric map (``egomap``).
 * :class:`RoomClassifier` — predicts the K room-type bits from 4 views with a
   shared per-view CNN and a learned attention over the views.
 * :class:`ControllerNet` — the LSTM controller of the HRL baseline, choosing
@@ -19,7 +20,9 @@ Three networks, each built from a frozen config dataclass (defined in
 Observations follow the environment's keys, batched: ``segmentation`` int
 (B, H, W) class ids in ``[0, NUM_SEG_CLASSES)``, ``depth`` float (B, H, W) in
 metres, ``semantic`` (B, K) room-type bits, ``target`` (B, K) one-hot and
-``node`` (B, K + 1) one-hot of the graph node a shared sub-policy heads for.
+``node`` (B, K + 1) one-hot of the graph node a shared sub-policy heads for
+and ``egomap`` uint8 (B, C, S, S) the egocentric map of
+:mod:`leaps_mj.environment.mapping`.
 :meth:`ActorCritic.preprocess` turns the numpy observations into tensors.
 
 :func:`save_checkpoint` / :func:`load_policy` store a network with its config,
@@ -40,6 +43,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from leaps_mj.environment import mapping
 from leaps_mj.learning.net_configs import ControllerConfig, PolicyConfig, RoomClassifierConfig
 from leaps_mj.world import rooms
 
@@ -53,6 +57,9 @@ State = tuple[torch.Tensor, torch.Tensor]
 VIEW_COLUMNS = 5
 #: Metres per unit of the auxiliary distance head (distances are clipped at 2 units).
 AUX_DISTANCE_SCALE = 5.0
+#: Output channels of the egocentric map's conv layers (3x3, stride 2) and units of its linear layer.
+MAP_CHANNELS = (16, 32, 32)
+MAP_HIDDEN = 128
 
 
 def _layer_init(layer: nn.Module, std: float = math.sqrt(2.0)) -> nn.Module:
@@ -138,9 +145,12 @@ class ActorCritic(_Net):
     """CNN + LSTM actor-critic over segmentation + depth (the sub-policy μ(θ)).
 
     conv stack -> Linear(hidden) -> ReLU -> [+ semantic bits, target one-hot
-    when ``use_semantic``] [+ node one-hot when ``target_input``] ->
-    LSTMCell(lstm) -> [+ node one-hot when ``target_input``] -> policy logits
-    and value.
+    when ``use_semantic``] [+ node one-hot when ``target_input``] [+ map
+    features when ``map_input``] -> LSTMCell(lstm) -> [+ node one-hot when
+    ``target_input``] [+ map features when ``map_input``] -> policy logits
+    and value. The map features (3 stride-2 3x3 convs and a linear layer over
+    the egocentric map) also bypass the LSTM, so the heads read the map of
+    this step directly.
 
     The LSTM runs step by step (an ``LSTMCell``) so that :meth:`forward` and
     :meth:`forward_sequence` compute the same function and episode boundaries
@@ -165,21 +175,31 @@ class ActorCritic(_Net):
             flat = self.conv(dummy).shape[1]
         self.fc = nn.Sequential(_layer_init(nn.Linear(flat, config.hidden)), nn.ReLU())
         nodes = len(rooms.GRAPH_NODES) if config.target_input else 0
+        skip = MAP_HIDDEN if config.map_input else 0
+        if config.map_input:
+            layers, in_channels = [], len(mapping.CHANNELS)
+            for channels in MAP_CHANNELS:
+                layers += [_layer_init(nn.Conv2d(in_channels, channels, 3, 2, 1)), nn.ReLU()]
+                in_channels = channels
+            side = mapping.WINDOW // 2 ** len(MAP_CHANNELS)
+            self.map_net = nn.Sequential(*layers, nn.Flatten(),
+                                         _layer_init(nn.Linear(in_channels * side * side, MAP_HIDDEN)), nn.ReLU())
         lstm_in = (config.hidden + (2 * rooms.NUM_ROOM_TYPES if config.use_semantic else 0) + nodes
-                   + (config.num_actions if config.prev_action else 0))
+                   + (config.num_actions if config.prev_action else 0) + skip)
         self.lstm = _lstm_cell(lstm_in, config.lstm)
-        self.policy = _layer_init(nn.Linear(config.lstm + nodes, config.num_actions), std=0.01)
-        self.value = _layer_init(nn.Linear(config.lstm + nodes, 1), std=1.0)
+        self.policy = _layer_init(nn.Linear(config.lstm + nodes + skip, config.num_actions), std=0.01)
+        self.value = _layer_init(nn.Linear(config.lstm + nodes + skip, 1), std=1.0)
         if config.aux:
             self.aux_view = _layer_init(nn.Linear(config.hidden, len(rooms.GRAPH_NODES) * VIEW_COLUMNS), std=0.01)
-            self.aux_here = _layer_init(nn.Linear(config.lstm + nodes, rooms.NUM_ROOM_TYPES), std=0.01)
-            self.aux_distance = _layer_init(nn.Linear(config.lstm + nodes, 1), std=0.01)
+            self.aux_here = _layer_init(nn.Linear(config.lstm + nodes + skip, rooms.NUM_ROOM_TYPES), std=0.01)
+            self.aux_distance = _layer_init(nn.Linear(config.lstm + nodes + skip, 1), std=0.01)
 
     def input_keys(self) -> tuple[str, ...]:
         """Observation keys the network reads."""
         cfg = self.config
         return (("segmentation", "depth") + (("semantic", "target") if cfg.use_semantic else ())
-                + (("node",) if cfg.target_input else ()) + (("prev_action",) if cfg.prev_action else ()))
+                + (("node",) if cfg.target_input else ()) + (("prev_action",) if cfg.prev_action else ())
+                + (("egomap",) if cfg.map_input else ()))
 
     @staticmethod
     def preprocess(
@@ -189,7 +209,7 @@ class ActorCritic(_Net):
 
         Shapes are kept, so both (B, ...) and (T, B, ...) batches work. Keys
         other than ``segmentation``, ``depth``, ``semantic``, ``target``,
-        ``node`` and ``prev_action`` are dropped.
+        ``node``, ``prev_action`` and ``egomap`` are dropped.
 
         Raises:
           ValueError: if a segmentation id is outside ``[0, NUM_SEG_CLASSES)``.
@@ -205,7 +225,7 @@ class ActorCritic(_Net):
             out["segmentation"] = torch.as_tensor(seg, dtype=torch.long, device=device)
         if "prev_action" in obs:
             out["prev_action"] = torch.as_tensor(np.asarray(obs["prev_action"]), dtype=torch.long, device=device)
-        for key in ("depth", "semantic", "target", "node"):
+        for key in ("depth", "semantic", "target", "node", "egomap"):
             if key in obs:
                 out[key] = torch.as_tensor(np.asarray(obs[key]), dtype=torch.float32, device=device)
         return out
@@ -215,8 +235,10 @@ class ActorCritic(_Net):
         zeros = torch.zeros(batch, self.config.lstm, device=device)
         return zeros, zeros.clone()
 
-    def _features(self, obs: Mapping[str, torch.Tensor], lead: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Frame features (N, hidden) and LSTM inputs (N, F) for observations with ``lead`` leading dims."""
+    def _features(self, obs: Mapping[str, torch.Tensor],
+                  lead: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Frame features (N, hidden), LSTM inputs (N, F) and the map features that bypass the LSTM
+        (N, MAP_HIDDEN; None without ``map_input``) for observations with ``lead`` leading dims."""
         cfg = self.config
         _require_keys(obs, self.input_keys())
         seg, depth = obs["segmentation"], obs["depth"]
@@ -224,8 +246,16 @@ class ActorCritic(_Net):
         _check_frames("depth", depth, cfg.width, cfg.height, lead)
         frame = self.fc(self.conv(self.pixels(seg.reshape(-1, cfg.height, cfg.width),
                                                depth.reshape(-1, cfg.height, cfg.width))))
-        extra = []
+        extra, skip = [], None
         for key in self.input_keys()[2:]:
+            if key == "egomap":
+                shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
+                expected = tuple(seg.shape[:lead]) + shape
+                if tuple(obs[key].shape) != expected:
+                    raise ValueError(f"egomap has shape {tuple(obs[key].shape)}; expected {expected}")
+                skip = self.map_net(obs[key].float().reshape(-1, *shape))
+                extra.append(skip)
+                continue
             if key == "prev_action":
                 _check_leading(key, obs[key], tuple(seg.shape[:lead]))
                 onehot = F.one_hot(obs[key].long().reshape(-1) + 1, cfg.num_actions + 1)[:, 1:]
@@ -236,13 +266,18 @@ class ActorCritic(_Net):
             if tuple(obs[key].shape) != expected:
                 raise ValueError(f"{key} has shape {tuple(obs[key].shape)}; expected {expected}")
             extra.append(obs[key].float().reshape(frame.shape[0], -1))
-        return frame, torch.cat([frame, *extra], dim=1) if extra else frame
+        return frame, torch.cat([frame, *extra], dim=1) if extra else frame, skip
 
-    def _head_input(self, h: torch.Tensor, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """The LSTM output, with the node one-hot when the network is shared by the nodes."""
-        if not self.config.target_input:
-            return h
-        return torch.cat([h, obs["node"].float().reshape(*h.shape[:-1], -1)], dim=-1)
+    def _head_input(self, h: torch.Tensor, obs: Mapping[str, torch.Tensor],
+                    skip: torch.Tensor | None) -> torch.Tensor:
+        """The LSTM output, with the node one-hot when the network is shared by the nodes and the
+        map features when it reads the map."""
+        parts = [h]
+        if self.config.target_input:
+            parts.append(obs["node"].float().reshape(*h.shape[:-1], -1))
+        if skip is not None:
+            parts.append(skip.reshape(*h.shape[:-1], -1))
+        return torch.cat(parts, dim=-1) if len(parts) > 1 else h
 
     def _heads(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.policy(h), self.value(h).squeeze(-1)
@@ -264,9 +299,9 @@ class ActorCritic(_Net):
         Returns:
           logits (B, num_actions), value (B,), new state.
         """
-        _, x = self._features(obs, lead=1)
+        _, x, skip = self._features(obs, lead=1)
         h, c = self.lstm(x, _reset(state, done_mask))
-        logits, value = self._heads(self._head_input(h, obs))
+        logits, value = self._heads(self._head_input(h, obs, skip))
         return logits, value, (h, c)
 
     def forward_sequence(
@@ -300,7 +335,7 @@ class ActorCritic(_Net):
           ``frame`` (T, B, hidden) frame features and ``head`` (T, B, F) the
           heads' input (LSTM outputs, with the node one-hot when shared).
         """
-        frame, x = self._features(obs, lead=2)
+        frame, x, skip = self._features(obs, lead=2)
         steps, batch = obs["segmentation"].shape[:2]
         if tuple(dones.shape) != (steps, batch):
             raise ValueError(f"dones has shape {tuple(dones.shape)}; expected (T, B) = ({steps}, {batch})")
@@ -309,7 +344,7 @@ class ActorCritic(_Net):
         for t in range(steps):
             state = self.lstm(x[t], _reset(state, dones[t]))
             hs.append(state[0])
-        head = self._head_input(torch.stack(hs), obs)
+        head = self._head_input(torch.stack(hs), obs, skip)
         logits, values = self._heads(head)
         return {"logits": logits, "values": values, "state": state, "frame": frame.reshape(steps, batch, -1),
                 "head": head}

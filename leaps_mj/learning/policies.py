@@ -24,6 +24,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from leaps_mj.environment import mapping
 from leaps_mj.learning import nets
 from leaps_mj.world import rooms
 
@@ -56,7 +57,9 @@ class LearnedSubPolicy:
     (the target they were trained for), so they act in any environment
     whatever its own target. A shared network (``target_input``) gets the
     one-hot of the graph node given to :meth:`reset`; a ``prev_action``
-    network its own previous action in this run (none after :meth:`reset`).
+    network its own previous action in this run (none after :meth:`reset`);
+    a ``map_input`` network the egocentric map this run's frames and poses
+    build (a new map at each :meth:`reset`), as in training.
 
     Args:
       folder: Folder with one ``<target>.pt`` checkpoint per target, or a
@@ -136,6 +139,8 @@ class LearnedSubPolicy:
         self._node_onehot = torch.nn.functional.one_hot(torch.tensor([rooms.room_index(target)]),
                                                         len(rooms.GRAPH_NODES)).float()
         self._prev_action = -1
+        self._mapper = (mapping.EgoMapper(target, self.width, self.height) if self._net.config.map_input
+                        else None)
 
     def _frame(self, frame) -> np.ndarray:
         """The frame at the policy's resolution (subsampled from an integer multiple)."""
@@ -162,7 +167,11 @@ class LearnedSubPolicy:
         if self._net is None:
             raise ValueError("call reset(target) before act()")
         obs = timestep.observation
-        x = nets.ActorCritic.preprocess({k: self._frame(obs[k])[None] for k in ("segmentation", "depth")})
+        frames = {k: self._frame(obs[k]) for k in ("segmentation", "depth")}
+        x = nets.ActorCritic.preprocess({k: v[None] for k, v in frames.items()})
+        if self._mapper is not None:
+            egomap = self._mapper.update(frames["segmentation"], frames["depth"], obs["pose"])
+            x["egomap"] = torch.as_tensor(egomap[None], dtype=torch.float32)
         if self.use_semantic:
             x["semantic"] = torch.as_tensor(np.asarray(obs["semantic"], np.float32)[None])
             x["target"] = self._target_onehot

@@ -39,6 +39,10 @@ class TrainConfig:
         of one network per target. Written as ``shared.pt``.
       prev_action: The network also reads the action taken at the previous
         step (:class:`leaps_mj.learning.nets.PolicyConfig` ``prev_action``).
+      map_input: The network also reads the egocentric top-down map the
+        agent builds from its frames and pose
+        (:class:`leaps_mj.environment.mapping.EgoMapper`; the environments
+        add it to the observation as ``egomap``).
       aux_coef: Weight of the auxiliary losses (0: no auxiliary heads): the
         rooms each vertical strip of the frame shows, the room-type bits
         where the agent stands and the geodesic distance to the target,
@@ -113,6 +117,7 @@ class TrainConfig:
     use_semantic: bool = False
     shared: bool = False
     prev_action: bool = False
+    map_input: bool = False
     aux_coef: float = 0.0
     method: str = "a2c"
     init_from: str = ""
@@ -182,7 +187,8 @@ class TrainConfig:
         return nets.PolicyConfig(width=self.width, height=self.height, conv_channels=self.conv_channels,
                                  kernel=self.kernel, hidden=self.hidden, lstm=self.lstm, seg_embed=self.seg_embed,
                                  use_semantic=self.use_semantic, target_input=self.shared,
-                                 prev_action=self.prev_action, aux=self.aux_coef > 0)
+                                 prev_action=self.prev_action, aux=self.aux_coef > 0,
+                                 map_input=self.map_input)
 
     @property
     def labelled(self) -> bool:

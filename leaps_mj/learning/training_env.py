@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from leaps_mj.environment import roomnav, vector
+from leaps_mj.environment import mapping, roomnav, vector
 from leaps_mj.learning import nets
 from leaps_mj.learning.policy_config import TEACHERS, TrainConfig
 from leaps_mj.world import dataset as dataset_lib
@@ -61,6 +61,10 @@ class TrainingEnv:
       episode's graph node, the shared network's target input;
     * with ``config.prev_action``, ``prev_action`` (int64): the action that
       led to this step (-1 at an episode's first step);
+    * with ``config.map_input``, ``egomap`` (uint8 (C, S, S)): the
+      egocentric map of the episode so far
+      (:class:`leaps_mj.environment.mapping.EgoMapper`), built here, in the
+      worker process, from the observation alone;
     * with ``config.aux_coef > 0``, the auxiliary labels: ``room_view``
       (uint8 (K + 1, VIEW_COLUMNS)), 1 where at least
       :data:`VIEW_MIN_FRACTION` of a vertical strip of the frame shows a room
@@ -90,6 +94,8 @@ class TrainingEnv:
         self._expert = TEACHERS[config.teacher](env, seed=seed) if label else None
         self._last = True
         self._times = np.zeros(3)
+        self._mappers: dict[str, mapping.EgoMapper] = {}
+        self._mapper: mapping.EgoMapper | None = None
         task = env.task
         task.before_step = self._timed(task.before_step, 0)
         task.after_step = self._timed(task.after_step, 1)
@@ -114,10 +120,23 @@ class TrainingEnv:
             obs["node"] = np.eye(len(rooms.GRAPH_NODES), dtype=np.uint8)[task.target_index]
         if self._config.prev_action:
             obs["prev_action"] = np.int64(action)
+        if self._config.map_input:
+            obs["egomap"] = self._map(ts)
         if self._config.aux_coef > 0:
             obs["room_view"] = room_view(self._env.segment_luts[2].take(task.segments))
             obs["target_distance"] = np.float32(task.distance)
         return ts._replace(observation=obs)
+
+    def _map(self, ts) -> np.ndarray:
+        """The episode's egocentric map after this step (a new map at an episode's first step)."""
+        if ts.first():
+            target = rooms.GRAPH_NODES[self._env.task.target_index]
+            if target not in self._mappers:
+                self._mappers[target] = mapping.EgoMapper(target, self._config.width, self._config.height)
+            self._mapper = self._mappers[target]
+            self._mapper.reset()
+        obs = ts.observation
+        return self._mapper.update(obs["segmentation"], obs["depth"], obs["pose"])
 
     def reset(self):
         distance = self._config.start_distance_at(self._steps // self._config.t_max)

@@ -1,0 +1,145 @@
+"""An egocentric top-down map built from the agent's own frames and pose.
+
+The learners of sessions 4–7 (docs/training.md) failed where the way on
+depends on memory — which rooms were looked into, which doors were passed,
+where the target's furniture was glimpsed — and a CNN+LSTM imitating a teacher
+from 0.2–0.3 M samples did not learn to keep it. :class:`EgoMapper` keeps that
+memory explicitly, as the mapping modules of modular navigation agents do: each
+frame's depth is projected through the camera model into a top-down grid
+anchored at the run's first pose, the segmentation labels the projected points,
+and every step the grid is read out as a window centred on the agent and turned
+to its heading. It uses only what the agent senses (segmentation, depth and its
+pose, the ``pose`` observation), so a policy reading the map still acts on
+observations alone; it is rebuilt from scratch at each :meth:`EgoMapper.reset`.
+
+Channels of the map (uint8, 1 where the cell holds it):
+
+0. ``obstacle``: wall, fence or furniture seen between :data:`OBSTACLE_BAND` metres high;
+1. ``floor``: floor seen (free space);
+2. ``door``: a door lintel seen (the doorways);
+3. ``target``: one of the target's see-objects (none for ``outdoor`` and ``indoor``);
+4. ``furniture``: any other furniture;
+5. ``visited``: cells the agent stood in.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from leaps_mj.world import rooms
+
+#: The map's channels, in order.
+CHANNELS = ("obstacle", "floor", "door", "target", "furniture", "visited")
+#: Side of a map cell (metres).
+CELL = 0.25
+#: Cells on each side of the egocentric window (8 m at 0.25 m; the agent at its centre, facing up).
+WINDOW = 32
+#: Cells on each side of the allocentric grid the frames are projected into (32 m, centred on the first pose).
+GRID = 128
+#: Vertical field of view of the agent's camera (degrees; ``assets/agent.xml``).
+CAMERA_FOVY = 60.0
+#: Points farther than this (metres along the view axis) are not mapped: at 40x30 they are too coarse.
+MAX_RANGE = 8.0
+#: Heights (metres) between which a non-floor point counts as an obstacle.
+OBSTACLE_BAND = (0.05, 2.0)
+
+_FLOOR = rooms.seg_class_index("floor")
+_DOOR = rooms.seg_class_index("door")
+_UNMAPPED = [rooms.seg_class_index(c) for c in ("empty", "ceiling", "agent")]
+_FURNITURE = [rooms.seg_class_index(c) for c in rooms.FURNITURE_CLASSES]
+
+
+def _class_channels(target: str) -> np.ndarray:
+    """Channel of each segmentation class's points (-1: not mapped; obstacles are decided by height)."""
+    rooms.room_index(target)
+    table = np.full(rooms.NUM_SEG_CLASSES, CHANNELS.index("obstacle"), np.int64)
+    table[_FURNITURE] = CHANNELS.index("furniture")
+    table[[rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS.get(target, ())]] = CHANNELS.index("target")
+    table[_FLOOR] = CHANNELS.index("floor")
+    table[_DOOR] = CHANNELS.index("door")
+    table[_UNMAPPED] = -1
+    return table
+
+
+class EgoMapper:
+    """Accumulates frames into a top-down map and reads it out around the agent.
+
+    Args:
+      target: The graph node the run heads for (its see-objects fill the
+        ``target`` channel).
+      width, height: Resolution of the frames it is given.
+
+    Raises:
+      ValueError: for an unknown target or a non-positive resolution.
+    """
+
+    def __init__(self, target: str, width: int, height: int):
+        if width < 1 or height < 1:
+            raise ValueError(f"frame size {width}x{height}: expected positive width and height")
+        self.target = target
+        self.width, self.height = width, height
+        self._channel_of = _class_channels(target)
+        focal = (height / 2) / math.tan(math.radians(CAMERA_FOVY) / 2)
+        cols = (np.arange(width) + 0.5 - width / 2) / focal
+        rows = (height / 2 - np.arange(height) - 0.5) / focal
+        self._right, self._up = np.meshgrid(cols, rows)  # per metre of depth, (H, W)
+        # Window cell (i, j) lies (WINDOW/2 - i - 0.5) cells ahead of the agent and (WINDOW/2 - j - 0.5) to its left.
+        offsets = (WINDOW / 2 - np.arange(WINDOW) - 0.5) * CELL
+        self._ahead, self._left = np.meshgrid(offsets, offsets, indexing="ij")
+        self._grid = np.zeros((len(CHANNELS), GRID, GRID), np.uint8)
+        self._origin: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forgets the map; the next :meth:`update` anchors a new one at its pose."""
+        self._grid[:] = 0
+        self._origin = None
+
+    def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grid rows and columns of world points, and which of them fall inside the grid."""
+        col = np.floor((x - self._origin[0]) / CELL).astype(np.int64) + GRID // 2
+        row = np.floor((y - self._origin[1]) / CELL).astype(np.int64) + GRID // 2
+        inside = (row >= 0) & (row < GRID) & (col >= 0) & (col < GRID)
+        return row, col, inside
+
+    def update(self, segmentation: np.ndarray, depth: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """Adds a frame seen from ``pose`` and returns the map around the agent.
+
+        Args:
+          segmentation: (height, width) class ids.
+          depth: (height, width) metres along the view axis.
+          pose: (x, y, yaw radians) of the agent, as the ``pose`` observation.
+
+        Returns:
+          (len(CHANNELS), WINDOW, WINDOW) uint8: row 0 is ahead of the agent,
+          column 0 to its left; the agent stands between the four centre cells.
+
+        Raises:
+          ValueError: for frames of another size than the mapper's.
+        """
+        seg, depth = np.asarray(segmentation), np.asarray(depth, np.float64)
+        if seg.shape != (self.height, self.width) or depth.shape != seg.shape:
+            raise ValueError(f"frames of shapes {seg.shape} and {depth.shape}; expected "
+                             f"(height, width) = ({self.height}, {self.width})")
+        px, py, yaw = (float(v) for v in pose)
+        if self._origin is None:
+            self._origin = np.array([px, py])
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        channel = self._channel_of[seg]
+        z = rooms.AGENT_CAMERA_HEIGHT + self._up * depth
+        obstacle = CHANNELS.index("obstacle")
+        low, high = OBSTACLE_BAND
+        keep = (channel >= 0) & (depth <= MAX_RANGE) & ((channel != obstacle) | ((z >= low) & (z <= high)))
+        d, right, channel = depth[keep], self._right[keep] * depth[keep], channel[keep]
+        row, col, inside = self._cells(px + d * cos + right * sin, py + d * sin - right * cos)
+        self._grid[channel[inside], row[inside], col[inside]] = 1
+        here_row, here_col, here_inside = self._cells(np.array([px]), np.array([py]))
+        if here_inside[0]:
+            self._grid[CHANNELS.index("visited"), here_row[0], here_col[0]] = 1
+        wx = px + self._ahead * cos - self._left * sin
+        wy = py + self._ahead * sin + self._left * cos
+        row, col, inside = self._cells(wx, wy)
+        window = np.zeros((len(CHANNELS), WINDOW, WINDOW), np.uint8)
+        window[:, inside] = self._grid[:, row[inside], col[inside]]
+        return window
