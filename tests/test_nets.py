@@ -263,3 +263,29 @@ def test_paper_size_policy_builds_and_runs():
     with torch.no_grad():
         logits, value, _ = model(nets.ActorCritic.preprocess(random_obs((1,), 120, 90)), model.initial_state(1))
     assert logits.shape == (1, rooms.NUM_ACTIONS) and value.shape == (1,)
+
+
+def test_map_input_is_read_bypasses_the_lstm_and_is_checked():
+    from leaps_mj.environment import mapping
+
+    model = small_policy(map_input=True)
+    shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
+    rng = np.random.default_rng(1)
+    steps, batch = 3, 2
+    seq = nets.ActorCritic.preprocess({**random_obs((steps, batch)),
+                                       "egomap": rng.integers(0, 2, (steps, batch, *shape), dtype=np.uint8)})
+    assert model.input_keys()[-1] == "egomap" and seq["egomap"].dtype == torch.float32
+    with torch.no_grad():
+        out = model.unroll(seq, model.initial_state(batch), torch.zeros(steps, batch))
+        state = model.initial_state(batch)
+        for t in range(steps):
+            logits, _, state = model({k: v[t] for k, v in seq.items()}, state)
+            torch.testing.assert_close(logits, out["logits"][t], atol=1e-5, rtol=0)
+        step0 = {k: v[0] for k, v in seq.items()}
+        flipped, _, _ = model({**step0, "egomap": 1.0 - step0["egomap"]}, model.initial_state(batch))
+    assert not torch.allclose(flipped, out["logits"][0])
+    assert out["head"].shape[-1] == 32 + nets.MAP_HIDDEN
+    with pytest.raises(ValueError, match="egomap has shape"):
+        model({**step0, "egomap": step0["egomap"][:, :, :8]}, model.initial_state(batch))
+    with pytest.raises(ValueError, match="egomap"):
+        model({k: v for k, v in step0.items() if k != "egomap"}, model.initial_state(batch))
