@@ -7,6 +7,7 @@ Trainers (each a single-file module with its own ``main(argv)``, cleanrl style):
   policy      train per-target CNN+LSTM sub-policies (leaps_mj.learning.train_policy)
   classifier  train the CNN room-type classifier (leaps_mj.learning.train_classifier)
   controller  train the LSTM controller baseline (leaps_mj.learning.train_controller)
+  goal        train the map-goal sub-policy's network by DAgger rounds (leaps_mj.learning.train_goal)
   all         reproduce the shipped checkpoints: prior, policy (every target), obs-noise
 
 ``python -m leaps_mj.train <trainer> --help`` lists a trainer's options.
@@ -23,6 +24,7 @@ TRAINERS = {
     "policy": "leaps_mj.learning.train_policy",
     "classifier": "leaps_mj.learning.train_classifier",
     "controller": "leaps_mj.learning.train_controller",
+    "goal": "leaps_mj.learning.train_goal",
 }
 #: What ``all`` runs, in order (each trainer resumes from its checkpoints).
 ALL = ("prior", "policy", "obs-noise")

@@ -20,6 +20,10 @@ Channels of the map (uint8, 1 where the cell holds it):
 3. ``target``: one of the target's see-objects (none for ``outdoor`` and ``indoor``);
 4. ``furniture``: any other furniture;
 5. ``visited``: cells the agent stood in.
+
+Beside them it keeps a ``blocked`` layer for planning on the map
+(:mod:`leaps_mj.environment.map_navigation`): every non-floor, non-door point
+within :data:`OBSTACLE_BAND`, furniture included, and cells the agent bumped into.
 """
 
 from __future__ import annotations
@@ -89,19 +93,63 @@ class EgoMapper:
         offsets = (WINDOW / 2 - np.arange(WINDOW) - 0.5) * CELL
         self._ahead, self._left = np.meshgrid(offsets, offsets, indexing="ij")
         self._grid = np.zeros((len(CHANNELS), GRID, GRID), np.uint8)
+        self.blocked = np.zeros((GRID, GRID), bool)
         self._origin: np.ndarray | None = None
 
     def reset(self) -> None:
         """Forgets the map; the next :meth:`update` anchors a new one at its pose."""
         self._grid[:] = 0
+        self.blocked[:] = False
         self._origin = None
 
-    def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Grid rows and columns of world points, and which of them fall inside the grid."""
+    @property
+    def grid(self) -> np.ndarray:
+        """The allocentric map (len(CHANNELS), GRID, GRID): row ``r``, column ``c`` is the cell
+        ``(c - GRID/2) * CELL`` east and ``(r - GRID/2) * CELL`` north of the first pose."""
+        return self._grid
+
+    def cells(self, x, y) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grid rows and columns of world points (arrays), and which of them fall inside the grid.
+
+        Raises:
+          ValueError: before the first :meth:`update` (the grid has no anchor yet).
+        """
+        if self._origin is None:
+            raise ValueError("the map has no anchor yet: call update() first")
+        x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
         col = np.floor((x - self._origin[0]) / CELL).astype(np.int64) + GRID // 2
         row = np.floor((y - self._origin[1]) / CELL).astype(np.int64) + GRID // 2
         inside = (row >= 0) & (row < GRID) & (col >= 0) & (col < GRID)
         return row, col, inside
+
+    def world(self, row, col) -> tuple[np.ndarray, np.ndarray]:
+        """World (x, y) of grid cells' centres."""
+        x = self._origin[0] + (np.asarray(col) - GRID // 2 + 0.5) * CELL
+        y = self._origin[1] + (np.asarray(row) - GRID // 2 + 0.5) * CELL
+        return x, y
+
+    def window_world(self, pose) -> tuple[np.ndarray, np.ndarray]:
+        """World (x, y) of the centres of the egocentric window's cells around ``pose``, each (WINDOW, WINDOW)."""
+        px, py, yaw = (float(v) for v in pose)
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        return px + self._ahead * cos - self._left * sin, py + self._ahead * sin + self._left * cos
+
+    def window_cell(self, pose, x: float, y: float) -> tuple[int, int]:
+        """The egocentric window cell (row, column) holding world point (x, y) seen from ``pose``,
+        clipped to the window's border when the point lies outside it."""
+        px, py, yaw = (float(v) for v in pose)
+        dx, dy = x - px, y - py
+        ahead = dx * math.cos(yaw) + dy * math.sin(yaw)
+        left = -dx * math.sin(yaw) + dy * math.cos(yaw)
+        row = int(np.clip(math.floor(WINDOW / 2 - ahead / CELL), 0, WINDOW - 1))
+        col = int(np.clip(math.floor(WINDOW / 2 - left / CELL), 0, WINDOW - 1))
+        return row, col
+
+    def block(self, x: float, y: float) -> None:
+        """Marks the cell holding world point (x, y) as blocked (where the agent bumped into something)."""
+        row, col, inside = self.cells(x, y)
+        if inside:
+            self.blocked[row, col] = True
 
     def update(self, segmentation: np.ndarray, depth: np.ndarray, pose: np.ndarray) -> np.ndarray:
         """Adds a frame seen from ``pose`` and returns the map around the agent.
@@ -132,14 +180,15 @@ class EgoMapper:
         low, high = OBSTACLE_BAND
         keep = (channel >= 0) & (depth <= MAX_RANGE) & ((channel != obstacle) | ((z >= low) & (z <= high)))
         d, right, channel = depth[keep], self._right[keep] * depth[keep], channel[keep]
-        row, col, inside = self._cells(px + d * cos + right * sin, py + d * sin - right * cos)
+        row, col, inside = self.cells(px + d * cos + right * sin, py + d * sin - right * cos)
         self._grid[channel[inside], row[inside], col[inside]] = 1
-        here_row, here_col, here_inside = self._cells(np.array([px]), np.array([py]))
-        if here_inside[0]:
-            self._grid[CHANNELS.index("visited"), here_row[0], here_col[0]] = 1
-        wx = px + self._ahead * cos - self._left * sin
-        wy = py + self._ahead * sin + self._left * cos
-        row, col, inside = self._cells(wx, wy)
+        solid = inside & (channel != CHANNELS.index("floor")) & (channel != CHANNELS.index("door")) \
+            & (z[keep] >= low) & (z[keep] <= high)
+        self.blocked[row[solid], col[solid]] = True
+        here_row, here_col, here_inside = self.cells(px, py)
+        if here_inside:
+            self._grid[CHANNELS.index("visited"), here_row, here_col] = 1
+        row, col, inside = self.cells(*self.window_world(pose))
         window = np.zeros((len(CHANNELS), WINDOW, WINDOW), np.uint8)
         window[:, inside] = self._grid[:, row[inside], col[inside]]
         return window

@@ -152,6 +152,42 @@ class RoomClassifierConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class GoalNetConfig:
+    """Architecture of the map-goal network of the map-goal sub-policy.
+
+    Attributes:
+      width, height: Resolution of the frames its maps are built from (the
+        map's detail depends on it, so a network is tied to it as the pixel
+        policies are).
+      channels: Output channels of each 3x3 stride-2 conv layer over the
+        egocentric map.
+      hidden: Units of the linear layer after the conv stack (the node's
+        one-hot joins its output).
+      map_channels: Channels of the map (``len(mapping.CHANNELS)``).
+      window: Cells on each side of the egocentric map; the network scores
+        each of its ``window ** 2`` cells as the next goal.
+      num_nodes: Graph nodes it serves (one-hot input).
+    """
+
+    width: int = 40
+    height: int = 30
+    channels: tuple[int, ...] = (32, 64, 64)
+    hidden: int = 256
+    map_channels: int = 6
+    window: int = 32
+    num_nodes: int = len(rooms.GRAPH_NODES)
+
+    def __post_init__(self):
+        object.__setattr__(self, "channels", tuple(self.channels))
+        _check_positive_tuple("channels", self.channels)
+        for name in ("width", "height", "hidden", "map_channels", "window", "num_nodes"):
+            _check_positive(name, getattr(self, name))
+        if self.window % 2 ** len(self.channels):
+            raise ValueError(f"window {self.window} must be a multiple of 2 ** {len(self.channels)} "
+                             f"(one halving per conv layer)")
+
+
+@dataclasses.dataclass(frozen=True)
 class ControllerConfig:
     """Architecture of the HRL baseline's LSTM controller.
 

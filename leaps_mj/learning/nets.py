@@ -16,6 +16,8 @@ Three networks, each built from a frozen config dataclass (defined in
   shared per-view CNN and a learned attention over the views.
 * :class:`ControllerNet` — the LSTM controller of the HRL baseline, choosing
   the next sub-target room type from semantic bits.
+* :class:`GoalNet` — the map-goal sub-policy's network: scores every cell of
+  the agent's egocentric map as the place to walk to next.
 
 Observations follow the environment's keys, batched: ``segmentation`` int
 (B, H, W) class ids in ``[0, NUM_SEG_CLASSES)``, ``depth`` float (B, H, W) in
@@ -44,7 +46,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from leaps_mj.environment import mapping
-from leaps_mj.learning.net_configs import ControllerConfig, PolicyConfig, RoomClassifierConfig
+from leaps_mj.learning.net_configs import ControllerConfig, GoalNetConfig, PolicyConfig, RoomClassifierConfig
 from leaps_mj.world import rooms
 
 #: Tag stored in every checkpoint, checked on load.
@@ -459,8 +461,50 @@ class ControllerNet(_Net):
 
 
 #: Config class name -> (config class, network class), for loading.
+class GoalNet(_Net):
+    """Scores the cells of the egocentric map as the next goal (the map-goal sub-policy).
+
+    3x3 stride-2 convs over the map -> Linear(hidden) -> ReLU -> [+ node
+    one-hot] -> Linear(window ** 2): one logit per map cell, trained with
+    cross-entropy on the cell the geodesic path leads to
+    (:mod:`leaps_mj.learning.train_goal`). One network serves every graph
+    node; the map's ``target`` channel already holds the node's objects.
+    """
+
+    def __init__(self, config: GoalNetConfig = GoalNetConfig()):
+        super().__init__()
+        self.config = config
+        layers, in_channels = [], config.map_channels
+        for channels in config.channels:
+            layers += [_layer_init(nn.Conv2d(in_channels, channels, 3, 2, 1)), nn.ReLU()]
+            in_channels = channels
+        side = config.window // 2 ** len(config.channels)
+        self.conv = nn.Sequential(*layers, nn.Flatten(),
+                                  _layer_init(nn.Linear(in_channels * side * side, config.hidden)), nn.ReLU())
+        self.out = _layer_init(nn.Linear(config.hidden + config.num_nodes, config.window ** 2), std=0.01)
+
+    def forward(self, egomap: torch.Tensor, node: torch.Tensor) -> torch.Tensor:
+        """Goal logits (B, window ** 2), row-major over the window, from maps (B, C, window, window)
+        (any numeric dtype; cells are 0/1) and node indices (B,) ints.
+
+        Raises:
+          ValueError: for maps or node indices of another shape or range.
+        """
+        cfg = self.config
+        shape = (cfg.map_channels, cfg.window, cfg.window)
+        if egomap.dim() != 4 or tuple(egomap.shape[1:]) != shape:
+            raise ValueError(f"egomap has shape {tuple(egomap.shape)}; expected (B, {shape[0]}, {shape[1]}, {shape[2]})")
+        if tuple(node.shape) != egomap.shape[:1] or (node.numel() and not 0 <= int(node.min()) <= int(node.max())
+                                                     < cfg.num_nodes):
+            raise ValueError(f"node has shape {tuple(node.shape)} and values {node.tolist()[:8]}; expected "
+                             f"({egomap.shape[0]},) indices in [0, {cfg.num_nodes})")
+        features = self.conv(egomap.float())
+        return self.out(torch.cat([features, F.one_hot(node.long(), cfg.num_nodes).float()], dim=1))
+
+
 _NETS = {
     "PolicyConfig": (PolicyConfig, ActorCritic),
+    "GoalNetConfig": (GoalNetConfig, GoalNet),
     "RoomClassifierConfig": (RoomClassifierConfig, RoomClassifier),
     "ControllerConfig": (ControllerConfig, ControllerNet),
 }

@@ -1,0 +1,144 @@
+"""Walking to a point on the agent's own map: shortest paths over the cells it has not seen blocked.
+
+:class:`MapNavigator` is the low-level half of the map-goal sub-policy
+(:mod:`leaps_mj.learning.goal_policy`): a learned network picks *where* to go
+on the egocentric map, and this deterministic controller gets there with the
+9 discrete actions. It plans on :class:`leaps_mj.environment.mapping.EgoMapper`'s
+``blocked`` layer, widened by the agent's radius, and treats unseen cells as
+free (the optimistic assumption of frontier exploration); its steering is the
+geodesic expert's (face the point ``lookahead`` down the path, then move), so
+it reads nothing the agent does not sense: its own map, pose and collision flag.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.ndimage
+
+from leaps_mj.environment import expert, mapping
+
+#: Cells around a blocked cell that the planner keeps off (the agent's radius, 0.2 m, and a margin).
+CLEARANCE = 1
+#: Cells of path ahead of the agent it steers towards.
+LOOKAHEAD = 3
+#: Extra cells around the agent and the goal that a plan may use.
+MARGIN = 12
+#: Metres from the goal within which the agent has arrived.
+ARRIVED = 0.35
+_STEPS = ((-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0),
+          (-1, -1, math.sqrt(2)), (-1, 1, math.sqrt(2)), (1, -1, math.sqrt(2)), (1, 1, math.sqrt(2)))
+
+
+def path_distances(free: np.ndarray, goal: tuple[int, int]) -> np.ndarray:
+    """Shortest 8-connected path lengths (in cells) to ``goal`` over the ``free`` cells.
+
+    A wavefront: every sweep lowers each free cell to its neighbours' distance
+    plus the step's length, until nothing changes. The goal's own cell counts
+    as free.
+
+    Args:
+      free: (R, C) bool.
+      goal: (row, column) of the goal cell.
+
+    Returns:
+      (R, C) float, ``inf`` where the goal cannot be reached.
+    """
+    dist = np.full(free.shape, np.inf)
+    dist[goal] = 0.0
+    free = free.copy()
+    free[goal] = True
+    padded = np.full((free.shape[0] + 2, free.shape[1] + 2), np.inf)
+    for _ in range(free.size):
+        padded[1:-1, 1:-1] = dist
+        best = dist.copy()
+        for di, dj, length in _STEPS:
+            np.minimum(best, padded[1 + di:1 + di + free.shape[0], 1 + dj:1 + dj + free.shape[1]] + length, out=best)
+        best[~free] = np.inf
+        if np.array_equal(best, dist):
+            break
+        dist = best
+    return dist
+
+
+class MapNavigator:
+    """Steers the agent to world points over the map it has built so far.
+
+    Args:
+      mapper: The run's map (updated by the caller before each :meth:`act`).
+      seed: Seed of the random unsticking moves after a collision.
+    """
+
+    def __init__(self, mapper: mapping.EgoMapper, seed: int = 0):
+        self.mapper = mapper
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """A new run (optionally reseeding the unsticking moves)."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+
+    def bumped(self, pose) -> None:
+        """Records a collision: the cell just ahead of ``pose`` is blocked."""
+        x, y, yaw = (float(v) for v in pose)
+        self.mapper.block(x + 0.35 * math.cos(yaw), y + 0.35 * math.sin(yaw))
+
+    def waypoint(self, pose, goal_xy) -> np.ndarray | None:
+        """The point :data:`LOOKAHEAD` cells down the shortest path from ``pose`` to ``goal_xy``.
+
+        The path keeps :data:`CLEARANCE` cells off blocked cells where it can,
+        and may touch them where it cannot; where the map knows no path at all
+        (the agent hemmed in by what it mapped), the goal itself.
+
+        Returns:
+          (x, y), or None when the agent is within :data:`ARRIVED` metres of the goal.
+        """
+        if math.hypot(goal_xy[0] - pose[0], goal_xy[1] - pose[1]) < ARRIVED:
+            return None
+        m = self.mapper
+        (ar, gr), (ac, gc), _ = m.cells([pose[0], goal_xy[0]], [pose[1], goal_xy[1]])
+        ar, ac, gr, gc = (int(np.clip(v, 0, mapping.GRID - 1)) for v in (ar, ac, gr, gc))
+        if (ar, ac) == (gr, gc):
+            return np.asarray(goal_xy[:2], np.float64)
+        r0, c0 = max(0, min(ar, gr) - MARGIN), max(0, min(ac, gc) - MARGIN)
+        r1, c1 = min(mapping.GRID, max(ar, gr) + MARGIN + 1), min(mapping.GRID, max(ac, gc) + MARGIN + 1)
+        i, j = ar - r0, ac - c0
+        for clearance in (CLEARANCE, 0):
+            blocked = m.blocked[r0:r1, c0:c1]
+            free = ~scipy.ndimage.binary_dilation(blocked, iterations=clearance) if clearance else ~blocked
+            free[i, j] = True  # the agent's own cell, even when a wall was mapped into it
+            dist = path_distances(free, (gr - r0, gc - c0))
+            if np.isfinite(dist[i, j]):
+                break
+        else:
+            return np.asarray(goal_xy[:2], np.float64)
+        for _ in range(LOOKAHEAD):
+            best = (dist[i, j], i, j)
+            for di, dj, _length in _STEPS:
+                a, b = i + di, j + dj
+                if 0 <= a < dist.shape[0] and 0 <= b < dist.shape[1] and dist[a, b] < best[0]:
+                    best = (dist[a, b], a, b)
+            if best[1:] == (i, j):
+                break
+            _, i, j = best
+        x, y = m.world(i + r0, j + c0)
+        return np.array([float(x), float(y)])
+
+    def act(self, pose, goal_xy, collided: bool) -> int | None:
+        """The action towards ``goal_xy`` from ``pose``; None at the goal.
+
+        After a collision it marks the blocked cell and, half of the time,
+        makes a random unsticking move as the geodesic expert does.
+        """
+        if collided:
+            self.bumped(pose)
+            if self.rng.random() < 0.5:
+                return int(self.rng.choice([expert.LEFT, expert.RIGHT, expert.SMALL_FORWARD]))
+        wp = self.waypoint(pose, goal_xy)
+        if wp is None:
+            return None
+        err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - float(pose[2]), 2 * math.pi)
+        if abs(err) > math.radians(16):
+            return expert._turn(err)
+        return expert.FORWARD if math.hypot(wp[0] - pose[0], wp[1] - pose[1]) > 0.45 else expert.SMALL_FORWARD

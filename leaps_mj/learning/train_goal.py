@@ -1,0 +1,373 @@
+"""Train the map-goal sub-policy's network by DAgger in rounds over an aggregated dataset.
+
+``python -m leaps_mj.train goal --out runs/goal`` (resumable: rerun the same command after a kill)
+
+Each round, worker processes run training episodes (hop-like: starts at
+most ``max_start_doors`` doors from a room of the target, ``horizon`` steps,
+every graph node) with :class:`leaps_mj.learning.goal_policy.GoalDriver`: at
+each step the egocentric map is stored with the teacher's goal — the cell of
+the map where the geodesic expert's path lies :data:`TEACHER_LOOKAHEAD`
+metres ahead (the agent's own cell once it stands where the target is seen)
+— and the goals that drive the episode are the teacher's (round 0, then with
+probability ``beta`` per episode) or the network's. The round's samples are
+added to the dataset on disk (``data/round_<k>.npz``, bit-packed maps) and
+the network is trained for ``epochs`` passes over all of it (cross-entropy
+over the map's cells). This is the issue's "aggregated on-disk DAgger
+dataset trained for several epochs per round": the workers' frames cost
+nothing to the learner, and a sample is reused ``epochs`` times per round.
+
+Written under ``--out``: ``goal.pt`` (the network, after each round),
+``state.pt`` (network, optimiser, round: what resuming reads),
+``progress.csv`` (per round: samples, the driving policy's success, loss and
+accuracy), TensorBoard events, ``training_curves.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import csv
+import dataclasses
+import io
+import math
+import multiprocessing
+import os
+import pathlib
+import sys
+import time
+
+import numpy as np
+import scipy.ndimage
+import torch
+import torch.nn.functional as F
+
+from leaps_mj.environment import expert as expert_lib
+from leaps_mj.environment import mapping, roomnav
+from leaps_mj.learning import goal_policy, nets, training_env
+from leaps_mj.learning import trainer as trainer_lib
+from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import rooms
+
+#: Metres down the geodesic path to the target at which the teacher's goal lies.
+TEACHER_LOOKAHEAD = 3.0
+#: Metres by which the teacher's goal zone is shrunk from its border (see :class:`TeacherGoals`).
+TEACHER_INSET = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class GoalTrainConfig:
+    """A map-goal training run.
+
+    Attributes:
+      dataset: House dataset (its ``train`` split).
+      num_houses: Train on the first this many houses of the split (0: all), sharded over the workers.
+      width, height: Frame resolution the maps are built from.
+      workers: Worker processes collecting episodes.
+      rounds: DAgger rounds.
+      episodes: Episodes collected per round (all workers together).
+      beta: Probability that the teacher's goals drive an episode after round 0.
+      epochs: Passes over the whole dataset after each round.
+      batch: Minibatch size.
+      lr: Adam learning rate.
+      horizon: Steps of a training episode.
+      max_start_doors: Starts at most this many doors from a room of the target.
+      max_start_distance: Starts at most this many metres (geodesic) from it.
+      seed: Seed of every random draw of the run.
+    """
+
+    dataset: str = dataset_lib.CANONICAL
+    num_houses: int = 64
+    width: int = 40
+    height: int = 30
+    workers: int = 2
+    rounds: int = 8
+    episodes: int = 240
+    beta: float = 0.25
+    epochs: int = 3
+    batch: int = 256
+    lr: float = 1e-3
+    horizon: int = 60
+    max_start_doors: int = 2
+    max_start_distance: float = 13.0
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
+                     "width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} {value!r}: expected a positive integer")
+        if not isinstance(self.num_houses, int) or self.num_houses < 0:
+            raise ValueError(f"num_houses {self.num_houses!r}: expected an integer >= 0")
+        if not 0.0 <= self.beta <= 1.0:
+            raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
+        for name in ("lr", "max_start_distance"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
+
+
+PRESETS = {
+    # Seconds: for tests.
+    "tiny": GoalTrainConfig(num_houses=4, width=24, height=18, workers=1, rounds=2, episodes=2, epochs=1,
+                            batch=16, horizon=12),
+    # The shipped network: 8 rounds of 240 hop-like episodes on the 2 cores.
+    "cpu": GoalTrainConfig(),
+}
+
+
+class TeacherGoals:
+    """The teacher's goals, as cells of the egocentric map: the geodesic expert's path, looked further ahead.
+
+    The goal is the point :data:`TEACHER_LOOKAHEAD` metres down the geodesic
+    expert's steering field towards the target's zone (the viewing zone of
+    its see-objects, or the rooms of ``outdoor`` and ``indoor``) shrunk by
+    up to :data:`TEACHER_INSET` metres (as much as leaves any of it), so that the
+    agent walks into the room rather than stopping on its threshold; inside
+    that, the agent's own cell. Fields are cached per house and target.
+
+    Args:
+      env: The training environment.
+      seed: Seed of the expert (its random moves are not used).
+    """
+
+    def __init__(self, env, seed: int = 0):
+        self.env = env
+        self.expert = expert_lib.GeodesicExpert(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
+        self._fields: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+
+    def _field(self, target: str) -> tuple[np.ndarray, np.ndarray]:
+        hm = self.env.task.house_model
+        key = (hm.house.id, target)
+        if key not in self._fields:
+            field, _, _ = self.expert.field(target, bool(rooms.SEE_OBJECTS.get(target)))
+            zone = field == 0
+            for iterations in range(max(1, round(TEACHER_INSET / hm.grid.cell)), 0, -1):
+                inner = scipy.ndimage.binary_erosion(zone, iterations=iterations)
+                if inner.any():
+                    zone = inner
+                    break
+            self._fields[key] = self.expert.zone_field(zone)
+        return self._fields[key]
+
+    def cell(self, mapper: mapping.EgoMapper, pose) -> int:
+        """The goal at ``pose`` for the current episode, as a row-major index into the egocentric map."""
+        field, nearest = self._field(self.env.task.episode.target)
+        grid = self.env.task.house_model.grid
+        i, j = grid.to_cell(pose[:2])
+        # Off the field (too near a wall for the expert's clearance) the path starts at the field's nearest cell.
+        start = pose[:2] if np.isfinite(field[i, j]) else grid.to_world((nearest[0, i, j], nearest[1, i, j]))
+        point = self.expert.waypoint(field, nearest, start)
+        if point is None:
+            point = pose[:2]
+        row, col = mapper.window_cell(pose, float(point[0]), float(point[1]))
+        return row * mapping.WINDOW + col
+
+
+def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, beta: float,
+            state_dict: dict | None) -> dict[str, np.ndarray]:
+    """Runs ``episodes`` training episodes in one process and returns their labelled samples.
+
+    Args:
+      config: The run's configuration.
+      houses_dir: This worker's shard of the training houses.
+      seed: Seed of the environment, the teacher and the goal coins.
+      episodes: Episodes to run.
+      beta: Probability that the teacher's goals drive an episode (the network's otherwise).
+      state_dict: The network's weights (None: the teacher drives every episode).
+
+    Returns:
+      ``maps`` (N, packed bytes) uint8 bit-packed egocentric maps, ``node``
+      (N,) and ``label`` (N,) ints, ``success`` (E,) and ``teacher`` (E,)
+      bools: whether each episode succeeded and whether the teacher drove it.
+    """
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(seed)
+    net = None
+    if state_dict is not None:
+        net = nets.GoalNet(nets.GoalNetConfig(width=config.width, height=config.height))
+        net.load_state_dict(state_dict)
+        net.eval()
+    env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
+                       horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
+                       max_start_distance=config.max_start_distance)
+    teacher = TeacherGoals(env, seed)
+    drivers: dict[str, goal_policy.GoalDriver] = {}
+    maps, nodes, labels, success, driven = [], [], [], [], []
+    try:
+        for _ in range(episodes):
+            ts = env.reset()
+            target = env.task.episode.target
+            driver = drivers.setdefault(target, goal_policy.GoalDriver(target, config.width, config.height))
+            driver.reset(int(rng.integers(2 ** 31)))
+            by_teacher = net is None or rng.random() < beta
+            while not ts.last():
+                window = driver.observe(ts.observation)
+                label = teacher.cell(driver.mapper, driver.pose)
+                maps.append(np.packbits(window))
+                nodes.append(driver.node)
+                labels.append(label)
+                if driver.needs_goal():
+                    if by_teacher:
+                        driver.set_goal(label)
+                    else:
+                        with torch.no_grad():
+                            logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]))
+                        driver.set_goal(int(logits.argmax()))
+                ts = env.step(driver.act())
+            success.append(bool(env.task.success))
+            driven.append(by_teacher)
+    finally:
+        env.close()
+    return {"maps": np.asarray(maps, np.uint8), "node": np.asarray(nodes, np.int64),
+            "label": np.asarray(labels, np.int64), "success": np.asarray(success, bool),
+            "teacher": np.asarray(driven, bool)}
+
+
+def _unpack(maps: np.ndarray) -> torch.Tensor:
+    """Bit-packed maps (N, bytes) back to (N, C, WINDOW, WINDOW) uint8 tensors."""
+    shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
+    bits = np.unpackbits(maps, axis=1, count=int(np.prod(shape)))
+    return torch.as_tensor(bits.reshape(-1, *shape))
+
+
+class GoalTrainer(trainer_lib.Trainer):
+    """DAgger in rounds for the map-goal network (one iteration = one round)."""
+
+    unit = "round"
+    loss_keys = frozenset({"loss", "accuracy"})
+
+    def __init__(self, config: GoalTrainConfig, out: str | os.PathLike, progress: bool = True):
+        super().__init__(config, out, config.rounds, progress=progress, desc="goal rounds")
+        torch.manual_seed(config.seed)
+        self.model = nets.GoalNet(nets.GoalNetConfig(width=config.width, height=config.height))
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr)
+        self.data_dir = self.out / "data"
+        self._pool = None
+
+    def session(self):
+        self._pool = concurrent.futures.ProcessPoolExecutor(
+            self.config.workers, mp_context=multiprocessing.get_context("spawn"))
+        return self._pool
+
+    def _collect(self) -> dict[str, np.ndarray]:
+        c = self.config
+        shards = training_env.training_houses(c.dataset, None, c.num_houses, c.workers, self.out, name="goal")
+        weights = None if self.iteration == 0 else {k: v.clone() for k, v in self.model.state_dict().items()}
+        beta = 1.0 if self.iteration == 0 else c.beta
+        counts = [c.episodes // c.workers + (w < c.episodes % c.workers) for w in range(c.workers)]
+        futures = [self._pool.submit(collect, c, str(shard), c.seed + 1000 * self.iteration + w, n, beta, weights)
+                   for w, (shard, n) in enumerate(zip(shards, counts)) if n]
+        parts = [f.result() for f in futures]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def _dataset(self) -> dict[str, np.ndarray]:
+        files = [self.data_dir / f"round_{k:03d}.npz" for k in range(self.iteration + 1)]
+        parts = [np.load(f) for f in files]
+        return {k: np.concatenate([p[k] for p in parts]) for k in ("maps", "node", "label")}
+
+    def iterate(self) -> dict:
+        c = self.config
+        t0 = time.perf_counter()
+        fresh = self._collect()
+        collect_seconds = time.perf_counter() - t0
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **fresh)
+        dataset_lib.write_atomic(self.data_dir / f"round_{self.iteration:03d}.npz", buffer.getvalue())
+        data = self._dataset()
+        rng = np.random.default_rng(c.seed + self.iteration)
+        self.model.train()
+        losses, correct, seen = [], 0, 0
+        for _ in range(c.epochs):
+            order = rng.permutation(len(data["label"]))
+            for start in range(0, len(order), c.batch):
+                idx = np.sort(order[start:start + c.batch])
+                logits = self.model(_unpack(data["maps"][idx]), torch.as_tensor(data["node"][idx]))
+                labels = torch.as_tensor(data["label"][idx])
+                loss = F.cross_entropy(logits, labels)
+                self.optimizer.zero_grad()
+                loss.backward()
+                self.optimizer.step()
+                losses.append(loss.item())
+                correct += int((logits.argmax(1) == labels).sum())
+                seen += len(idx)
+        self.model.eval()
+        learner = ~fresh["teacher"]
+        return {"samples": len(data["label"]), "fresh_samples": len(fresh["label"]),
+                "teacher_success": float(fresh["success"][~learner].mean()) if (~learner).any() else float("nan"),
+                "learner_success": float(fresh["success"][learner].mean()) if learner.any() else float("nan"),
+                "loss": float(np.mean(losses[-max(1, len(losses) // c.epochs):])), "accuracy": correct / seen,
+                "collect_seconds": collect_seconds, "train_seconds": time.perf_counter() - t0 - collect_seconds}
+
+    def postfix(self, row: dict) -> dict[str, str]:
+        return {"learner": f"{row['learner_success']:.2f}", "acc": f"{row['accuracy']:.2f}"}
+
+    def publish(self, extra: dict) -> None:
+        nets.save_checkpoint(self.out / goal_policy.GOAL, self.model, self.model.config, extra)
+
+
+def plot_curves(progress: pathlib.Path, out: pathlib.Path) -> pathlib.Path:
+    """Success of the episodes each round's goals drove (teacher, learner) and the imitation accuracy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with open(progress) as f:
+        rows = list(csv.DictReader(f))
+    rounds = [int(r["round"]) for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for key, label in (("teacher_success", "episodes driven by the teacher's goals"),
+                       ("learner_success", "episodes driven by the network's goals"),
+                       ("accuracy", "goal-cell accuracy (training)")):
+        values = [float(r[key]) if r[key] not in ("", "nan") else math.nan for r in rows]
+        ax.plot(rounds, values, marker="o", label=label)
+    ax.set_xlabel("DAgger round")
+    ax.set_ylim(0, 1)
+    ax.set_title("map-goal sub-policy training")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m leaps_mj.train goal", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="cpu", help="base configuration")
+    parser.add_argument("--out", default="runs/goal", help="output folder (resumed if it holds a run)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of the learner")
+    parser.add_argument("--stop-after", type=int, default=None,
+                        help="stop after this many more rounds (checkpointed; rerun resumes)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
+    for field in dataclasses.fields(GoalTrainConfig):
+        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=type(field.default),
+                           default=None, metavar=type(field.default).__name__.upper())
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(GoalTrainConfig)
+                 if getattr(args, f.name) is not None}
+    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    if args.threads < 1:
+        raise ValueError(f"--threads {args.threads}: expected a positive integer")
+    if args.stop_after is not None and args.stop_after < 1:
+        raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")
+    torch.set_num_threads(args.threads)
+    trainer = GoalTrainer(config, args.out, progress=not args.no_progress)
+    trainer.resume(config.width, config.height)
+    trainer.train(args.stop_after)
+    if trainer.finished:
+        print(f"wrote {trainer.out / goal_policy.GOAL} and {plot_curves(trainer.out / 'progress.csv', trainer.out / 'training_curves.png')}")
+    else:
+        print(f"stopped after round {trainer.iteration} of {config.rounds}; rerun the same command to resume")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
