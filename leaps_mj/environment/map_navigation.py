@@ -8,6 +8,9 @@ on the egocentric map, and this deterministic controller gets there with the
 free (the optimistic assumption of frontier exploration); its steering is the
 geodesic expert's (face the point ``lookahead`` down the path, then move), so
 it reads nothing the agent does not sense: its own map, pose and collision flag.
+:class:`GoalDriver` wraps a map, a navigator and the current goal into one
+run's controller, the part shared by the learned map-goal sub-policy, its
+trainer and the ``oracle-map`` agent (the same driver with the teacher's goals).
 """
 
 from __future__ import annotations
@@ -17,7 +20,13 @@ import math
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, mapping
+from leaps_mj.environment import expert, mapping, roomnav
+from leaps_mj.world import rooms
+
+#: Steps between two goal choices of a :class:`GoalDriver` (it walks to the last goal in between).
+REPLAN = 4
+#: Share of the frame the target's objects must fill for a :class:`GoalDriver` to stop and look (the see test's).
+SEE_FRACTION = roomnav.EnvConfig.success_fraction
 
 #: Cells around a blocked cell that the planner keeps off (the agent's radius, 0.2 m, and a margin).
 CLEARANCE = 1
@@ -142,3 +151,74 @@ class MapNavigator:
         if abs(err) > math.radians(16):
             return expert._turn(err)
         return expert.FORWARD if math.hypot(wp[0] - pose[0], wp[1] - pose[1]) > 0.45 else expert.SMALL_FORWARD
+
+
+class GoalDriver:
+    """One run's map, planner and goal: turns observations and chosen goals into actions.
+
+    The sub-policy gives it goals from the network; the trainer from the
+    network or from the teacher. Call :meth:`observe` with each step's
+    observation, then :meth:`set_goal` when :meth:`needs_goal`, then :meth:`act`.
+
+    Args:
+      target: The graph node of the run.
+      width, height: Resolution of the frames it is given.
+      seed: Seed of the planner's unsticking moves.
+    """
+
+    def __init__(self, target: str, width: int, height: int, seed: int = 0):
+        self.target = target
+        self.node = rooms.GRAPH_NODES.index(target)
+        self.mapper = mapping.EgoMapper(target, width, height)
+        self.navigator = MapNavigator(self.mapper, seed)
+        see = [rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS.get(target, ())]
+        self._see = np.zeros(rooms.NUM_SEG_CLASSES, bool)
+        self._see[see] = True
+        self.reset()
+
+    def reset(self, seed: int | None = None) -> None:
+        """A new run: empty map, no goal."""
+        self.mapper.reset()
+        self.navigator.reset(seed)
+        self.goal: np.ndarray | None = None
+        self.steps = 0
+        self.pose = np.zeros(3)
+        self._collided = False
+        self._fraction = 0.0
+
+    def observe(self, observation) -> np.ndarray:
+        """Adds the step's frame to the map; returns the egocentric map (C, WINDOW, WINDOW)."""
+        seg = np.asarray(observation["segmentation"])
+        self.pose = np.asarray(observation["pose"], np.float64)
+        self._collided = bool(observation["collision"]) and self.steps > 0
+        self._fraction = float(self._see[seg].mean())
+        return self.mapper.update(seg, observation["depth"], self.pose)
+
+    def needs_goal(self) -> bool:
+        """Whether this step chooses a new goal (the first step, then every :data:`REPLAN`)."""
+        return self.goal is None or self.steps % REPLAN == 0
+
+    def set_goal(self, cell: int) -> None:
+        """Heads for a cell of the egocentric map (row-major index into the window) around the current pose."""
+        row, col = divmod(int(cell), mapping.WINDOW)
+        x, y = self.mapper.window_world(self.pose)
+        self.goal = np.array([x[row, col], y[row, col]])
+
+    def act(self) -> int:
+        """The action of this step: walk to the goal; there, face the target's nearest mapped object."""
+        self.steps += 1
+        action = self.navigator.act(self.pose, self.goal, self._collided) if self.goal is not None else None
+        if action is not None:
+            return action
+        seen = np.argwhere(self.mapper.grid[mapping.CHANNELS.index("target")])
+        if not len(seen):
+            return expert.LEFT  # nothing of the target mapped here: look around
+        x, y = self.mapper.world(seen[:, 0], seen[:, 1])
+        distance = np.hypot(x - self.pose[0], y - self.pose[1])
+        k = int(np.argmin(distance))
+        err = math.remainder(math.atan2(y[k] - self.pose[1], x[k] - self.pose[0]) - self.pose[2], 2 * math.pi)
+        if abs(err) > math.radians(10):
+            return expert._turn(err)
+        if self._fraction >= SEE_FRACTION:
+            return expert.STAY
+        return expert.SMALL_FORWARD if distance[k] > 1.0 else expert.STAY

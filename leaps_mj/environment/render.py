@@ -199,3 +199,22 @@ class SegDepthRenderer:
             self._mjr = None
             if self._owns_ctx:
                 self._ctx.free()
+
+
+def subsample(frame, width: int, height: int) -> np.ndarray:
+    """A (H, W) frame at ``width`` x ``height``, from a frame of that size or an integer multiple of it.
+
+    The centre pixel of every k x k block is kept: the same rays as rendering
+    at the smaller size, so the same frame (for policies trained at 40x30
+    acting in the standard 120x90 environment).
+
+    Raises:
+      ValueError: for a frame of another size.
+    """
+    frame = np.asarray(frame)
+    h, w = frame.shape[-2:]
+    k = h // height
+    if frame.ndim == 2 and k >= 1 and (h, w) == (k * height, k * width):
+        return frame[k // 2::k, k // 2::k]
+    raise ValueError(f"frame of shape {frame.shape}; this policy takes {width}x{height} frames "
+                     f"(width x height) or an integer multiple of that size")

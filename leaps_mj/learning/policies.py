@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from leaps_mj.environment import mapping
+from leaps_mj.environment import mapping, render
 from leaps_mj.learning import nets
 from leaps_mj.world import rooms
 
@@ -142,16 +142,6 @@ class LearnedSubPolicy:
         self._mapper = (mapping.EgoMapper(target, self.width, self.height) if self._net.config.map_input
                         else None)
 
-    def _frame(self, frame) -> np.ndarray:
-        """The frame at the policy's resolution (subsampled from an integer multiple)."""
-        frame = np.asarray(frame)
-        h, w = frame.shape[-2:]
-        k = h // self.height
-        if frame.ndim == 2 and k >= 1 and (h, w) == (k * self.height, k * self.width):
-            return frame[k // 2::k, k // 2::k]
-        raise ValueError(f"frame of shape {frame.shape}; this policy takes {self.width}x{self.height} frames "
-                         f"(width x height) or an integer multiple of that size")
-
     @torch.no_grad()
     def act(self, timestep) -> int:
         """The action for a time step's observation (segmentation + depth).
@@ -167,7 +157,7 @@ class LearnedSubPolicy:
         if self._net is None:
             raise ValueError("call reset(target) before act()")
         obs = timestep.observation
-        frames = {k: self._frame(obs[k]) for k in ("segmentation", "depth")}
+        frames = {k: render.subsample(obs[k], self.width, self.height) for k in ("segmentation", "depth")}
         x = nets.ActorCritic.preprocess({k: v[None] for k, v in frames.items()})
         if self._mapper is not None:
             egomap = self._mapper.update(frames["segmentation"], frames["depth"], obs["pose"])

@@ -4,10 +4,10 @@
 
 Each round, worker processes run training episodes (hop-like: starts at
 most ``max_start_doors`` doors from a room of the target, ``horizon`` steps,
-every graph node) with :class:`leaps_mj.learning.goal_policy.GoalDriver`: at
+every graph node) with :class:`leaps_mj.environment.map_navigation.GoalDriver`: at
 each step the egocentric map is stored with the teacher's goal — the cell of
-the map where the geodesic expert's path lies :data:`TEACHER_LOOKAHEAD`
-metres ahead (the agent's own cell once it stands where the target is seen)
+the map where the geodesic expert's path lies
+:data:`leaps_mj.environment.goal_teacher.TEACHER_LOOKAHEAD` metres ahead (the agent's own cell once it stands where the target is seen)
 — and the goals that drive the episode are the teacher's (round 0, then with
 probability ``beta`` per episode) or the network's. The round's samples are
 added to the dataset on disk (``data/round_<k>.npz``, bit-packed maps) and
@@ -37,21 +37,15 @@ import sys
 import time
 
 import numpy as np
-import scipy.ndimage
 import torch
 import torch.nn.functional as F
 
-from leaps_mj.environment import expert as expert_lib
-from leaps_mj.environment import mapping, roomnav
+from leaps_mj.environment import goal_teacher, map_navigation, mapping, roomnav
 from leaps_mj.learning import goal_policy, nets, training_env
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import rooms
 
-#: Metres down the geodesic path to the target at which the teacher's goal lies.
-TEACHER_LOOKAHEAD = 3.0
-#: Metres by which the teacher's goal zone is shrunk from its border (see :class:`TeacherGoals`).
-TEACHER_INSET = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,54 +109,6 @@ PRESETS = {
 }
 
 
-class TeacherGoals:
-    """The teacher's goals, as cells of the egocentric map: the geodesic expert's path, looked further ahead.
-
-    The goal is the point :data:`TEACHER_LOOKAHEAD` metres down the geodesic
-    expert's steering field towards the target's zone (the viewing zone of
-    its see-objects, or the rooms of ``outdoor`` and ``indoor``) shrunk by
-    up to :data:`TEACHER_INSET` metres (as much as leaves any of it), so that the
-    agent walks into the room rather than stopping on its threshold; inside
-    that, the agent's own cell. Fields are cached per house and target.
-
-    Args:
-      env: The training environment.
-      seed: Seed of the expert (its random moves are not used).
-    """
-
-    def __init__(self, env, seed: int = 0):
-        self.env = env
-        self.expert = expert_lib.GeodesicExpert(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
-        self._fields: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
-
-    def _field(self, target: str) -> tuple[np.ndarray, np.ndarray]:
-        hm = self.env.task.house_model
-        key = (hm.house.id, target)
-        if key not in self._fields:
-            field, _, _ = self.expert.field(target, bool(rooms.SEE_OBJECTS.get(target)))
-            zone = field == 0
-            for iterations in range(max(1, round(TEACHER_INSET / hm.grid.cell)), 0, -1):
-                inner = scipy.ndimage.binary_erosion(zone, iterations=iterations)
-                if inner.any():
-                    zone = inner
-                    break
-            self._fields[key] = self.expert.zone_field(zone)
-        return self._fields[key]
-
-    def cell(self, mapper: mapping.EgoMapper, pose) -> int:
-        """The goal at ``pose`` for the current episode, as a row-major index into the egocentric map."""
-        field, nearest = self._field(self.env.task.episode.target)
-        grid = self.env.task.house_model.grid
-        i, j = grid.to_cell(pose[:2])
-        # Off the field (too near a wall for the expert's clearance) the path starts at the field's nearest cell.
-        start = pose[:2] if np.isfinite(field[i, j]) else grid.to_world((nearest[0, i, j], nearest[1, i, j]))
-        point = self.expert.waypoint(field, nearest, start)
-        if point is None:
-            point = pose[:2]
-        row, col = mapper.window_cell(pose, float(point[0]), float(point[1]))
-        return row * mapping.WINDOW + col
-
-
 def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, beta: float,
             state_dict: dict | None) -> dict[str, np.ndarray]:
     """Runs ``episodes`` training episodes in one process and returns their labelled samples.
@@ -190,14 +136,14 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
                        horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
                        max_start_distance=config.max_start_distance)
-    teacher = TeacherGoals(env, seed)
-    drivers: dict[str, goal_policy.GoalDriver] = {}
+    teacher = goal_teacher.TeacherGoals(env, seed)
+    drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, nodes, labels, success, driven = [], [], [], [], []
     try:
         for _ in range(episodes):
             ts = env.reset()
             target = env.task.episode.target
-            driver = drivers.setdefault(target, goal_policy.GoalDriver(target, config.width, config.height))
+            driver = drivers.setdefault(target, map_navigation.GoalDriver(target, config.width, config.height))
             driver.reset(int(rng.integers(2 ** 31)))
             by_teacher = net is None or rng.random() < beta
             while not ts.last():

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, looking_expert, observable_expert
+from leaps_mj.environment import expert, goal_teacher, looking_expert, map_navigation, observable_expert, render
 from leaps_mj.planning import semantic
 from leaps_mj.world import rooms
 
@@ -192,6 +192,47 @@ class ObservableAgent(OracleAgent):
 
     name = "observable"
     expert_class = observable_expert.ObservableExpert
+
+
+class MapOracleAgent:
+    """The map-goal sub-policy's walk with the teacher's goals instead of the network's: its ceiling.
+
+    A :class:`leaps_mj.environment.map_navigation.GoalDriver` builds the
+    agent's own map from its frames (subsampled to ``width`` x ``height``, the
+    shipped network's resolution) and walks to the goals of
+    :class:`leaps_mj.environment.goal_teacher.TeacherGoals`, which read the
+    house's map.
+
+    Args:
+      env: the environment it acts in (the teacher reads its state).
+      seed: seed of the planner's unsticking moves.
+      width, height: resolution of the frames its map is built from.
+    """
+
+    name = "oracle-map"
+
+    def __init__(self, env, seed: int = 0, width: int = 40, height: int = 30):
+        self.teacher = goal_teacher.TeacherGoals(env, seed)
+        self.width, self.height = width, height
+        self.seed = seed
+        self.driver: map_navigation.GoalDriver | None = None
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target, rooms.GRAPH_NODES)
+        self.driver = map_navigation.GoalDriver(self.target, self.width, self.height)
+        self.driver.reset(self.seed)
+
+    def step(self, timestep) -> int:
+        obs = timestep.observation
+        frames = {k: render.subsample(obs[k], self.width, self.height) for k in ("segmentation", "depth")}
+        self.driver.observe({**frames, "pose": obs["pose"], "collision": obs["collision"]})
+        if self.driver.needs_goal():
+            self.driver.set_goal(self.teacher.cell(self.driver.mapper, self.driver.pose))
+        return self.driver.act()
+
+    def info(self) -> dict:
+        return {"subtarget": self.target, "plan": [], "belief": None}
 
 
 @dataclasses.dataclass(frozen=True)

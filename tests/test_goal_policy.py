@@ -1,0 +1,156 @@
+"""Tests of the map-goal sub-policy: planner, driver, teacher, network, sub-policy and trainer."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import leaps_mj
+from leaps_mj.environment import expert, goal_teacher, map_navigation, mapping
+from leaps_mj.evaluation import registry
+from leaps_mj.learning import goal_policy, nets, train_goal
+from leaps_mj.world import rooms
+
+W, H = 24, 18
+
+
+def test_path_distances_go_around_walls():
+    free = np.ones((5, 5), bool)
+    free[1:4, 2] = False  # a wall in column 2, open at the top and bottom rows
+    dist = map_navigation.path_distances(free, (2, 0))
+    assert dist[2, 0] == 0 and dist[2, 1] == 1
+    assert dist[2, 2] == np.inf
+    # Round the wall's top end: (2,0) -> (1,1) -> (0,2) -> (1,3) -> (2,4), 4 diagonal steps.
+    assert dist[2, 4] == pytest.approx(4 * math.sqrt(2))
+    closed = free.copy()
+    closed[:, 2] = False
+    assert np.isinf(map_navigation.path_distances(closed, (2, 0))[2, 4])
+
+
+def _empty_step(driver, pose, collision=False):
+    seg = np.zeros((H, W), np.uint8)  # nothing seen: no cell blocked
+    return driver.observe({"segmentation": seg, "depth": np.ones((H, W), np.float32), "pose": pose,
+                           "collision": np.uint8(collision)})
+
+
+def test_driver_turns_towards_the_goal_then_walks_and_stops_there():
+    driver = map_navigation.GoalDriver("outdoor", W, H)
+    pose = np.array([0.0, 0.0, 0.0])
+    _empty_step(driver, pose)
+    assert driver.needs_goal()
+    driver.goal = np.array([0.0, 2.0])  # 2 m to the left
+    assert driver.act() == expert.LEFT
+    pose = np.array([0.0, 0.0, math.pi / 2])
+    _empty_step(driver, pose)
+    assert driver.act() == expert.FORWARD
+    _empty_step(driver, np.array([0.0, 1.9, math.pi / 2]))
+    # Arrived; nothing of the target (outdoor has no see-objects) is mapped: it looks around.
+    assert driver.act() == expert.LEFT
+
+
+def test_driver_goes_round_what_it_mapped():
+    driver = map_navigation.GoalDriver("outdoor", W, H)
+    _empty_step(driver, np.array([0.0, 0.0, 0.0]))
+    driver.mapper.blocked[mapping.GRID // 2 - 4:mapping.GRID // 2 + 1, mapping.GRID // 2 + 4] = True  # a wall 1 m ahead
+    wp = driver.navigator.waypoint(np.array([0.0, 0.0, 0.0]), (2.0, -0.05))
+    assert wp is not None and wp[1] > 0.2  # around the wall's open (left) end, not straight on
+    driver.mapper.blocked[:, mapping.GRID // 2 + 4] = True  # now closed: it heads for the goal regardless
+    np.testing.assert_allclose(driver.navigator.waypoint(np.array([0.0, 0.0, 0.0]), (2.0, -0.05)), (2.0, -0.05))
+
+
+def test_set_goal_reads_window_cells_around_the_pose():
+    driver = map_navigation.GoalDriver("kitchen", W, H)
+    pose = np.array([3.0, 1.0, math.pi / 2])  # facing +y
+    _empty_step(driver, pose)
+    driver.set_goal(0 * mapping.WINDOW + mapping.WINDOW // 2)  # top row, centre: ahead of the agent
+    assert driver.goal[1] > 1.0 + 3.5 and abs(driver.goal[0] - 3.0) < 0.3
+    assert driver.mapper.window_cell(pose, *driver.goal) == (0, mapping.WINDOW // 2)
+
+
+@pytest.fixture(scope="module")
+def env(tiny_dataset):
+    e = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=W, height=H, horizon=60, max_start_doors=1)
+    yield e
+    e.close()
+
+
+def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env):
+    agent = registry.make_agent("oracle-map", env, seed=0)
+    agent.width, agent.height = W, H
+    successes = 0
+    for episode in range(4):
+        ts = env.reset()
+        agent.reset(env.episode.target)
+        while not ts.last():
+            action = agent.step(ts)
+            label = agent.teacher.cell(agent.driver.mapper, agent.driver.pose)
+            assert 0 <= label < mapping.WINDOW ** 2
+            ts = env.step(action)
+        successes += env.task.success
+    assert successes >= 2
+
+
+def test_goal_net_shapes_and_errors():
+    net = nets.GoalNet(nets.GoalNetConfig(width=W, height=H))
+    maps = torch.zeros(3, len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW, dtype=torch.uint8)
+    assert net(maps, torch.tensor([0, 4, 8])).shape == (3, mapping.WINDOW ** 2)
+    with pytest.raises(ValueError, match="egomap has shape"):
+        net(maps[:, :3], torch.tensor([0, 4, 8]))
+    with pytest.raises(ValueError, match=r"indices in \[0, 9\)"):
+        net(maps, torch.tensor([0, 4, 9]))
+    with pytest.raises(ValueError, match="multiple of"):
+        nets.GoalNetConfig(window=30)
+
+
+def test_goal_sub_policy_loads_acts_and_refuses_other_checkpoints(tmp_path, env):
+    torch.manual_seed(0)
+    config = nets.GoalNetConfig(width=W, height=H)
+    nets.save_checkpoint(tmp_path / goal_policy.GOAL, nets.GoalNet(config), config, {})
+    policy = goal_policy.GoalSubPolicy(tmp_path)
+    assert policy.targets == rooms.GRAPH_NODES
+    with pytest.raises(ValueError, match="reset"):
+        policy.act(env.reset())
+    with pytest.raises(ValueError, match="no sub-policy for target"):
+        policy.reset("attic")
+
+    def run():
+        ts = env.reset_to(spec)
+        policy.reset(spec.target)
+        actions = []
+        for _ in range(10):
+            actions.append(policy.act(ts))
+            ts = env.step(actions[-1])
+        return actions
+
+    env.reset()
+    spec = env.episode
+    first = run()
+    assert all(0 <= a < rooms.NUM_ACTIONS for a in first) and run() == first
+    pixel = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16)
+    nets.save_checkpoint(tmp_path / "other" / goal_policy.GOAL, nets.ActorCritic(pixel), pixel, {})
+    with pytest.raises(ValueError, match="not a map-goal network"):
+        goal_policy.GoalSubPolicy(tmp_path / "other")
+    with pytest.raises(ValueError, match="train one with"):
+        goal_policy.GoalSubPolicy(tmp_path / "missing")
+
+
+def test_trainer_writes_the_network_and_a_killed_run_resumes_to_the_same_bytes(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=2, episodes=2)
+    whole = train_goal.GoalTrainer(config, tmp_path / "whole", progress=False)
+    whole.train()
+    parts = train_goal.GoalTrainer(config, tmp_path / "parts", progress=False)
+    parts.train(stop_after=1)
+    assert not parts.finished
+    resumed = train_goal.GoalTrainer(config, tmp_path / "parts", progress=False)
+    assert resumed.resume(config.width, config.height) and resumed.iteration == 1
+    resumed.train()
+    for a, b in zip(whole.model.state_dict().values(), resumed.model.state_dict().values()):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    net, extra = goal_policy.load_goal_net(tmp_path / "whole" / goal_policy.GOAL)
+    assert extra["round"] == 2 and isinstance(net, nets.GoalNet)
+    data = np.load(tmp_path / "whole" / "data" / "round_001.npz")
+    assert data["maps"].shape[0] == data["label"].shape[0] > 0
+    with pytest.raises(ValueError, match="beta"):
+        dataclasses.replace(config, beta=1.5)
