@@ -154,3 +154,21 @@ def test_trainer_writes_the_network_and_a_killed_run_resumes_to_the_same_bytes(t
     assert data["maps"].shape[0] == data["label"].shape[0] > 0
     with pytest.raises(ValueError, match="beta"):
         dataclasses.replace(config, beta=1.5)
+
+
+def test_soft_goal_labels_and_mirroring():
+    labels = torch.tensor([5 * mapping.WINDOW + 7, 0])
+    sharp = torch.full((2, mapping.WINDOW ** 2), -20.0)
+    sharp[0, labels[0]] = sharp[1, 0] = 20.0
+    assert train_goal.goal_loss(sharp, labels, 0.0).item() < 1e-6
+    # A spread label rewards spreading too: the sharp prediction pays for its neighbours' share.
+    assert train_goal.goal_loss(sharp, labels, 1.0).item() > 1.0
+    near = sharp.clone()
+    near[0, labels[0] + 1] = 20.0  # the cell to its right as likely: closer to the spread label
+    assert train_goal.goal_loss(near, labels, 1.0) < train_goal.goal_loss(sharp, labels, 1.0)
+    maps = torch.arange(2 * mapping.WINDOW ** 2).reshape(2, 1, mapping.WINDOW, mapping.WINDOW)
+    flipped, moved = train_goal.mirror(maps, labels, torch.tensor([True, False]))
+    assert moved.tolist() == [5 * mapping.WINDOW + mapping.WINDOW - 1 - 7, 0]
+    assert torch.equal(flipped[0, 0, 3], maps[0, 0, 3].flip(0)) and torch.equal(flipped[1], maps[1])
+    twice, back = train_goal.mirror(flipped, moved, torch.tensor([True, False]))
+    assert torch.equal(twice, maps) and torch.equal(back, labels)

@@ -63,6 +63,10 @@ class GoalTrainConfig:
       epochs: Passes over the whole dataset after each round.
       batch: Minibatch size.
       lr: Adam learning rate.
+      mirror: Also train on each map mirrored left-right with its goal mirrored (a symmetry of the
+        task: every sample counts twice; each minibatch mirrors a random half).
+      label_sigma: Spread (cells) of the goal label: 0 trains on the teacher's one cell, above 0 on a
+        Gaussian over the cells around it (neighbouring cells lead the same way).
       horizon: Steps of a training episode.
       max_start_doors: Starts at most this many doors from a room of the target.
       max_start_distance: Starts at most this many metres (geodesic) from it.
@@ -80,6 +84,8 @@ class GoalTrainConfig:
     epochs: int = 3
     batch: int = 256
     lr: float = 1e-3
+    mirror: bool = False
+    label_sigma: float = 0.0
     horizon: int = 60
     max_start_doors: int = 2
     max_start_distance: float = 13.0
@@ -95,6 +101,8 @@ class GoalTrainConfig:
             raise ValueError(f"num_houses {self.num_houses!r}: expected an integer >= 0")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
+        if not self.label_sigma >= 0:
+            raise ValueError(f"label_sigma {self.label_sigma!r}: expected a number >= 0")
         for name in ("lr", "max_start_distance"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
@@ -169,6 +177,25 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             "teacher": np.asarray(driven, bool)}
 
 
+def goal_loss(logits: torch.Tensor, labels: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Cross-entropy of goal logits (B, WINDOW ** 2) to the teacher's cells (B,), spread over a Gaussian
+    of ``sigma`` cells around each (plain cross-entropy at 0)."""
+    if sigma == 0:
+        return F.cross_entropy(logits, labels)
+    cells = torch.arange(mapping.WINDOW, dtype=torch.float32)
+    rows, cols = (labels // mapping.WINDOW).float(), (labels % mapping.WINDOW).float()
+    d2 = (cells[None, :, None] - rows[:, None, None]) ** 2 + (cells[None, None, :] - cols[:, None, None]) ** 2
+    target = torch.softmax(-d2.reshape(len(labels), -1) / (2 * sigma ** 2), dim=1)
+    return -(target * F.log_softmax(logits, dim=1)).sum(1).mean()
+
+
+def mirror(maps: torch.Tensor, labels: torch.Tensor, which: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Maps (B, C, S, S) and goal cells (B,) with the rows ``which`` (bool, B) mirrored left-right."""
+    maps = torch.where(which[:, None, None, None], maps.flip(-1), maps)
+    flipped = labels // mapping.WINDOW * mapping.WINDOW + (mapping.WINDOW - 1 - labels % mapping.WINDOW)
+    return maps, torch.where(which, flipped, labels)
+
+
 def _unpack(maps: np.ndarray) -> torch.Tensor:
     """Bit-packed maps (N, bytes) back to (N, C, WINDOW, WINDOW) uint8 tensors."""
     shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
@@ -228,9 +255,11 @@ class GoalTrainer(trainer_lib.Trainer):
             order = rng.permutation(len(data["label"]))
             for start in range(0, len(order), c.batch):
                 idx = np.sort(order[start:start + c.batch])
-                logits = self.model(_unpack(data["maps"][idx]), torch.as_tensor(data["node"][idx]))
-                labels = torch.as_tensor(data["label"][idx])
-                loss = F.cross_entropy(logits, labels)
+                maps, labels = _unpack(data["maps"][idx]), torch.as_tensor(data["label"][idx])
+                if c.mirror:
+                    maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
+                logits = self.model(maps, torch.as_tensor(data["node"][idx]))
+                loss = goal_loss(logits, labels, c.label_sigma)
                 self.optimizer.zero_grad()
                 loss.backward()
                 self.optimizer.step()
@@ -290,7 +319,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(GoalTrainConfig):
-        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=type(field.default),
+        kind = trainer_lib.parse_bool if isinstance(field.default, bool) else type(field.default)
+        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind,
                            default=None, metavar=type(field.default).__name__.upper())
     return parser
 

@@ -315,14 +315,6 @@ def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device:
 # -- command line --------------------------------------------------------------------------------
 
 
-def _parse_bool(text: str) -> bool:
-    if text.lower() in ("1", "true", "yes"):
-        return True
-    if text.lower() in ("0", "false", "no"):
-        return False
-    raise argparse.ArgumentTypeError(f"{text!r}: expected true or false")
-
-
 def _parse_ints(text: str) -> tuple[int, ...]:
     try:
         return tuple(int(v) for v in text.split(","))
@@ -371,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     group = parser.add_argument_group("configuration overrides (default: the preset's value)")
     for field in dataclasses.fields(TrainConfig):
         default = field.default
-        kind = {bool: _parse_bool, tuple: _parse_ints}.get(type(default), type(default))
+        kind = {bool: trainer_lib.parse_bool, tuple: _parse_ints}.get(type(default), type(default))
         group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind, default=None,
                            metavar=type(default).__name__.upper())
     return parser

@@ -23,6 +23,7 @@ prior's exploration counts) write JSON.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import csv
 import dataclasses
@@ -36,6 +37,15 @@ from typing import Any
 import tqdm
 
 from leaps_mj.world import dataset as dataset_lib
+
+
+def parse_bool(text: str) -> bool:
+    """A command-line boolean: true / false (also 1 / 0, yes / no)."""
+    if text.lower() in ("1", "true", "yes"):
+        return True
+    if text.lower() in ("0", "false", "no"):
+        return False
+    raise argparse.ArgumentTypeError(f"{text!r}: expected true or false")
 
 
 def plain(value: Any) -> Any:
