@@ -192,3 +192,23 @@ def test_temperature_is_a_learned_subpolicy_option_left_out_of_config_json_at_on
         evaluate.EvalConfig(subpolicy="local", temperature=0.5)
     with pytest.raises(ValueError, match="temperature 0: expected a positive number"):
         evaluate.EvalConfig(subpolicy="learned", temperature=0)
+
+
+def test_main_runs_leaps_over_a_map_goal_sub_policy_from_policy_dir(tiny_dataset, tmp_path, capsys):
+    """--policy-dir with a goal.pt drives LEAPS and pure with the map-goal sub-policy; a temperature is refused."""
+    import torch
+
+    from leaps_mj.learning import goal_policy, nets
+
+    torch.manual_seed(0)
+    config = nets.GoalNetConfig(width=24, height=18)
+    nets.save_checkpoint(tmp_path / "goal" / goal_policy.GOAL, nets.GoalNet(config), config, {})
+    argv = ["--agent", "pure", "leaps", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "20",
+            "--subpolicy", "learned", "--policy-dir", str(tmp_path / "goal"), "--limit", "2", "--no-progress"]
+    assert evaluate.main(argv + ["--out", str(tmp_path / "eval")]) == 0
+    saved = json.loads((tmp_path / "eval" / "config.json").read_text())
+    assert saved["policy_dir"] == str(tmp_path / "goal")
+    with open(tmp_path / "eval" / "episodes_leaps.csv") as f:
+        assert len(list(csv.DictReader(f))) == 2
+    assert evaluate.main(argv + ["--out", str(tmp_path / "hot"), "--temperature", "0.5"]) == 2
+    assert "does not sample" in capsys.readouterr().err

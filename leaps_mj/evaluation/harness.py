@@ -626,6 +626,9 @@ def main(argv=None) -> int:
     p.add_argument("--replan-every", type=int, default=30, help="LEAPS's N")
     p.add_argument("--temperature", type=float, default=1.0,
                    help="sampling temperature of the learned sub-policies' actions (1: as trained)")
+    p.add_argument("--policy-dir", default=None,
+                   help="with --subpolicy learned: a folder of sub-policy checkpoints (<node>.pt, shared.pt, or a "
+                        "map-goal network goal.pt) instead of the shipped ones")
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
                    help=f"episodes per plan length: {SUBSETS}")
     p.add_argument("--episodes-per-length", type=int, default=None, help="overrides --subset")
@@ -645,7 +648,7 @@ def main(argv=None) -> int:
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
                             prior=args.prior, replan_every=args.replan_every, seed=args.seed,
-                            temperature=args.temperature)
+                            temperature=args.temperature, policy_dir=args.policy_dir)
         if "leaps" in " ".join(args.agent):
             agents_lib.load_model(args.prior)  # fail now, not in a worker
         if args.record:
