@@ -172,3 +172,17 @@ def test_soft_goal_labels_and_mirroring():
     assert torch.equal(flipped[0, 0, 3], maps[0, 0, 3].flip(0)) and torch.equal(flipped[1], maps[1])
     twice, back = train_goal.mirror(flipped, moved, torch.tensor([True, False]))
     assert torch.equal(twice, maps) and torch.equal(back, labels)
+
+
+def test_quarter_turns_move_the_goal_with_the_map():
+    size = mapping.WINDOW
+    labels = torch.tensor([2 * size + 5] * 4)
+    maps = torch.zeros(4, 2, size, size)
+    maps[:, 1, 2, 5] = 1.0  # the goal's cell marked in one channel
+    turned, moved = train_goal.rotate(maps, labels, torch.tensor([0, 1, 2, 3]))
+    for i in range(4):
+        row, col = divmod(int(moved[i]), size)
+        assert turned[i, 1, row, col] == 1.0 and turned[i, 1].sum() == 1.0
+    assert moved[0] == labels[0] and len(set(moved.tolist())) == 4
+    back, again = train_goal.rotate(*train_goal.rotate(maps, labels, torch.tensor([1, 1, 1, 1])), torch.tensor([3] * 4))
+    assert torch.equal(back, maps) and torch.equal(again, labels)

@@ -65,6 +65,9 @@ class GoalTrainConfig:
       lr: Adam learning rate.
       mirror: Also train on each map mirrored left-right with its goal mirrored (a symmetry of the
         task: every sample counts twice; each minibatch mirrors a random half).
+      rotate: Also train on each map turned by a random multiple of 90° about the agent with its goal
+        turned alike: which cell a map's walls, doors and objects make the goal hardly depends on
+        which way the agent faces (with ``mirror``, the 8 symmetries of the square).
       label_sigma: Spread (cells) of the goal label: 0 trains on the teacher's one cell, above 0 on a
         Gaussian over the cells around it (neighbouring cells lead the same way).
       horizon: Steps of a training episode.
@@ -85,6 +88,7 @@ class GoalTrainConfig:
     batch: int = 256
     lr: float = 1e-3
     mirror: bool = False
+    rotate: bool = False
     label_sigma: float = 0.0
     horizon: int = 60
     max_start_doors: int = 2
@@ -196,6 +200,22 @@ def mirror(maps: torch.Tensor, labels: torch.Tensor, which: torch.Tensor) -> tup
     return maps, torch.where(which, flipped, labels)
 
 
+def rotate(maps: torch.Tensor, labels: torch.Tensor, turns: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Maps (B, C, S, S) and goal cells (B,) each turned counter-clockwise by ``turns`` (B,) quarter turns."""
+    size = mapping.WINDOW
+    rows, cols = labels // size, labels % size
+    out_maps, out_labels = maps.clone(), labels.clone()
+    for k in (1, 2, 3):
+        which = turns == k
+        if which.any():
+            out_maps[which] = torch.rot90(maps[which], k, dims=(-2, -1))
+            r, c = rows[which], cols[which]
+            for _ in range(k):  # one counter-clockwise quarter turn: (r, c) -> (S - 1 - c, r)
+                r, c = size - 1 - c, r
+            out_labels[which] = r * size + c
+    return out_maps, out_labels
+
+
 def _unpack(maps: np.ndarray) -> torch.Tensor:
     """Bit-packed maps (N, bytes) back to (N, C, WINDOW, WINDOW) uint8 tensors."""
     shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
@@ -258,6 +278,8 @@ class GoalTrainer(trainer_lib.Trainer):
                 maps, labels = _unpack(data["maps"][idx]), torch.as_tensor(data["label"][idx])
                 if c.mirror:
                     maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
+                if c.rotate:
+                    maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
                 logits = self.model(maps, torch.as_tensor(data["node"][idx]))
                 loss = goal_loss(logits, labels, c.label_sigma)
                 self.optimizer.zero_grad()
