@@ -186,3 +186,19 @@ def test_quarter_turns_move_the_goal_with_the_map():
     assert moved[0] == labels[0] and len(set(moved.tolist())) == 4
     back, again = train_goal.rotate(*train_goal.rotate(maps, labels, torch.tensor([1, 1, 1, 1])), torch.tensor([3] * 4))
     assert torch.equal(back, maps) and torch.equal(again, labels)
+
+
+def test_the_shipped_map_goal_network_loads_and_acts_at_120x90(tiny_dataset, monkeypatch, tmp_path):
+    policy = goal_policy.load_default()
+    assert (policy.width, policy.height) == (40, 30) and policy.metadata["round"] == 12
+    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=8)
+    try:
+        ts = env.reset()
+        policy.reset(env.episode.target)
+        while not ts.last():
+            ts = env.step(policy.act(ts))
+    finally:
+        env.close()
+    monkeypatch.setattr(goal_policy, "DEFAULT_DIR", tmp_path)
+    with pytest.raises(ValueError, match="python -m leaps_mj.train goal"):
+        goal_policy.load_default()

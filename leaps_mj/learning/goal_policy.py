@@ -39,6 +39,10 @@ from leaps_mj.world import rooms
 
 #: File name of the map-goal network in a policy folder.
 GOAL = "goal.pt"
+#: Folder of the shipped map-goal network (cpu preset, 40x30 maps).
+DEFAULT_DIR = rooms.DATA_DIR / "policies" / "goal_cpu"
+#: The command that trains it (session 8; docs/training.md).
+TRAIN_COMMAND = (f"python -m leaps_mj.train goal --preset cpu && cp runs/goal/{GOAL} {DEFAULT_DIR}/")
 
 
 def load_goal_net(path: str | os.PathLike, width: int | None = None,
@@ -115,3 +119,14 @@ class GoalSubPolicy:
             logits = self.net(torch.as_tensor(window[None]), torch.tensor([self._driver.node]))
             self._driver.set_goal(int(logits.argmax()))
         return self._driver.act()
+
+
+def load_default(seed: int = 0) -> GoalSubPolicy:
+    """The shipped map-goal sub-policy (``leaps_mj/data/policies/goal_cpu/goal.pt``).
+
+    Raises:
+      ValueError: if the shipped network is missing, naming the command that trains it.
+    """
+    if not (DEFAULT_DIR / GOAL).is_file():
+        raise ValueError(f"no shipped map-goal network in {DEFAULT_DIR}; train it with `{TRAIN_COMMAND}`")
+    return GoalSubPolicy(DEFAULT_DIR, seed=seed)
