@@ -202,3 +202,20 @@ def test_the_shipped_map_goal_network_loads_and_acts_at_120x90(tiny_dataset, mon
     monkeypatch.setattr(goal_policy, "DEFAULT_DIR", tmp_path)
     with pytest.raises(ValueError, match="python -m leaps_mj.train goal"):
         goal_policy.load_default()
+
+
+def test_a_committed_driver_finishes_its_turn_before_choosing_again():
+    committed = map_navigation.GoalDriver("outdoor", W, H)
+    every = map_navigation.GoalDriver("outdoor", W, H, commit_turns=False)
+    for driver in (committed, every):
+        _empty_step(driver, np.array([0.0, 0.0, 0.0]))
+        driver.goal = np.array([-3.0, 0.0])  # behind: several turns to face it
+        driver._since_goal = 0
+        actions = []
+        for _ in range(map_navigation.REPLAN):
+            actions.append(driver.act())
+            _empty_step(driver, np.array([0.0, 0.0, 0.0]))  # frames do not move it here: still turning
+        assert set(actions) <= map_navigation.TURNS
+    assert every.needs_goal() and not committed.needs_goal()
+    committed._last_action = expert.FORWARD
+    assert committed.needs_goal()

@@ -25,6 +25,8 @@ from leaps_mj.world import rooms
 
 #: Steps between two goal choices of a :class:`GoalDriver` (it walks to the last goal in between).
 REPLAN = 4
+#: The rotations among the 9 actions (a :class:`GoalDriver` that commits to turns does not choose mid-turn).
+TURNS = frozenset({expert.LEFT, expert.RIGHT, expert.SMALL_LEFT, expert.SMALL_RIGHT})
 #: Share of the frame the target's objects must fill for a :class:`GoalDriver` to stop and look (the see test's).
 SEE_FRACTION = roomnav.EnvConfig.success_fraction
 
@@ -164,10 +166,17 @@ class GoalDriver:
       target: The graph node of the run.
       width, height: Resolution of the frames it is given.
       seed: Seed of the planner's unsticking moves.
+      commit_turns: Choose a new goal only once at least :data:`REPLAN` steps
+        went by *and* the last action was not a rotation, so a turn towards
+        a goal is finished before another goal is chosen; otherwise every
+        :data:`REPLAN` steps. Choosing mid-turn lets a learned goal flip
+        between two doors as the view turns: the agent then turns left and
+        right on the spot (session 8, docs/training.md).
     """
 
-    def __init__(self, target: str, width: int, height: int, seed: int = 0):
+    def __init__(self, target: str, width: int, height: int, seed: int = 0, commit_turns: bool = True):
         self.target = target
+        self.commit_turns = commit_turns
         self.node = rooms.GRAPH_NODES.index(target)
         self.mapper = mapping.EgoMapper(target, width, height)
         self.navigator = MapNavigator(self.mapper, seed)
@@ -182,6 +191,8 @@ class GoalDriver:
         self.navigator.reset(seed)
         self.goal: np.ndarray | None = None
         self.steps = 0
+        self._since_goal = 0
+        self._last_action: int | None = None
         self.pose = np.zeros(3)
         self._collided = False
         self._fraction = 0.0
@@ -195,18 +206,27 @@ class GoalDriver:
         return self.mapper.update(seg, observation["depth"], self.pose)
 
     def needs_goal(self) -> bool:
-        """Whether this step chooses a new goal (the first step, then every :data:`REPLAN`)."""
-        return self.goal is None or self.steps % REPLAN == 0
+        """Whether this step chooses a new goal: the first step, then after :data:`REPLAN` steps (and,
+        with ``commit_turns``, not in the middle of a turn)."""
+        if self.goal is None:
+            return True
+        return self._since_goal >= REPLAN and not (self.commit_turns and self._last_action in TURNS)
 
     def set_goal(self, cell: int) -> None:
         """Heads for a cell of the egocentric map (row-major index into the window) around the current pose."""
         row, col = divmod(int(cell), mapping.WINDOW)
         x, y = self.mapper.window_world(self.pose)
         self.goal = np.array([x[row, col], y[row, col]])
+        self._since_goal = 0
 
     def act(self) -> int:
         """The action of this step: walk to the goal; there, face the target's nearest mapped object."""
         self.steps += 1
+        self._since_goal += 1
+        self._last_action = self._action()
+        return self._last_action
+
+    def _action(self) -> int:
         action = self.navigator.act(self.pose, self.goal, self._collided) if self.goal is not None else None
         if action is not None:
             return action

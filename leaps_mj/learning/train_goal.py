@@ -70,6 +70,9 @@ class GoalTrainConfig:
         which way the agent faces (with ``mirror``, the 8 symmetries of the square).
       label_sigma: Spread (cells) of the goal label: 0 trains on the teacher's one cell, above 0 on a
         Gaussian over the cells around it (neighbouring cells lead the same way).
+      commit_turns: Whether the collecting drivers finish a turn before choosing the next goal
+        (:class:`leaps_mj.environment.map_navigation.GoalDriver`); the shipped network was collected
+        without (False), the sub-policy acts with it.
       horizon: Steps of a training episode.
       max_start_doors: Starts at most this many doors from a room of the target.
       max_start_distance: Starts at most this many metres (geodesic) from it.
@@ -90,6 +93,7 @@ class GoalTrainConfig:
     mirror: bool = False
     rotate: bool = False
     label_sigma: float = 0.0
+    commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
     max_start_distance: float = 13.0
@@ -156,7 +160,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
         for _ in range(episodes):
             ts = env.reset()
             target = env.task.episode.target
-            driver = drivers.setdefault(target, map_navigation.GoalDriver(target, config.width, config.height))
+            driver = drivers.setdefault(target, map_navigation.GoalDriver(target, config.width, config.height,
+                                                                         commit_turns=config.commit_turns))
             driver.reset(int(rng.integers(2 ** 31)))
             by_teacher = net is None or rng.random() < beta
             while not ts.last():
