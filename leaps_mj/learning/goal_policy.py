@@ -12,7 +12,7 @@ way modular navigation agents do:
   every cell of that map as the place to head for next (the target's
   objects once seen; otherwise the door the geodesic teacher would take, as
   well as the map lets it guess), every
-  :data:`leaps_mj.environment.map_navigation.REPLAN` steps;
+  :data:`leaps_mj.environment.map_navigation.REPLAN` steps, never mid-turn;
 * :class:`leaps_mj.environment.map_navigation.MapNavigator` walks there over
   the cells not seen blocked; at the goal the sub-policy faces the nearest
   mapped object of the target and stops where it fills the frame.
