@@ -35,11 +35,48 @@ _VIEW_RADIUS = 2.2  # metres from a see-object within which the agent looks at i
 _SAFE_RADIUS = 0.35  # clearance of the expert's paths (the agent's radius is 0.2)
 
 
-def _turn(err: float) -> int:
+#: Neighbour offsets the expert's descent visits, in order (the first of equal cells wins).
+_NEIGHBOURS = tuple((di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1))
+
+
+def turn_action(err: float) -> int:
     """Rotation action reducing a heading error (radians, left positive)."""
     if abs(err) > math.radians(22.5):
         return LEFT if err > 0 else RIGHT
     return SMALL_LEFT if err > 0 else SMALL_RIGHT
+
+
+def descend(field: np.ndarray, i: int, j: int, steps: int, neighbours=_NEIGHBOURS) -> tuple[int, int]:
+    """The cell reached from (i, j) by up to ``steps`` moves to the lowest neighbour of a distance field.
+
+    Each move goes to the first of ``neighbours`` (offsets, in the order given) whose value is lowest
+    and below the current cell's; it stops early where no neighbour is lower.
+    """
+    for _ in range(steps):
+        best = (field[i, j], i, j)
+        for di, dj in neighbours:
+            a, b = i + di, j + dj
+            if 0 <= a < field.shape[0] and 0 <= b < field.shape[1] and field[a, b] < best[0]:
+                best = (field[a, b], a, b)
+        if best[1:] == (i, j):
+            break
+        _, i, j = best
+    return i, j
+
+
+def unstick(rng: np.random.Generator) -> int | None:
+    """After a collision: half of the time a random unsticking move (left, right or a small step), else None."""
+    if rng.random() < 0.5:
+        return int(rng.choice([LEFT, RIGHT, SMALL_FORWARD]))
+    return None
+
+
+def steer(pose, waypoint, turn=turn_action) -> int:
+    """Turn towards ``waypoint`` (with ``turn``) until facing it within ``_FACE_TOL``, then step towards it."""
+    err = math.remainder(math.atan2(waypoint[1] - pose[1], waypoint[0] - pose[0]) - pose[2], 2 * math.pi)
+    if abs(err) > _FACE_TOL:
+        return turn(err)
+    return FORWARD if np.hypot(waypoint[0] - pose[0], waypoint[1] - pose[1]) > 0.45 else SMALL_FORWARD
 
 
 def half_view(env) -> float:
@@ -162,17 +199,7 @@ class GeodesicExpert:
                 return wp
         if field[i, j] == 0:
             return None
-        for _ in range(int(self.lookahead / grid.cell)):
-            best = (field[i, j], i, j)
-            for di in (-1, 0, 1):
-                for dj in (-1, 0, 1):
-                    a, b = i + di, j + dj
-                    if 0 <= a < grid.shape[0] and 0 <= b < grid.shape[1] and field[a, b] < best[0]:
-                        best = (field[a, b], a, b)
-            if best[1:] == (i, j):
-                break
-            _, i, j = best
-        return grid.to_world((i, j))
+        return grid.to_world(descend(field, i, j, int(self.lookahead / grid.cell)))
 
     def step_towards(self, target: str, view: bool, pose) -> int | None:
         """Action that follows the field to ``target`` from ``pose``; None at its goal."""
@@ -187,18 +214,17 @@ class GeodesicExpert:
         wp = self.waypoint(field, nearest, pose[:2])
         if wp is None:
             return None
-        if self.env.task.collision and self.rng.random() < 0.5:
-            return int(self.rng.choice([LEFT, RIGHT, SMALL_FORWARD]))
-        err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - pose[2], 2 * math.pi)
-        if abs(err) > _FACE_TOL:
-            return self.turn(err)
-        return FORWARD if np.hypot(*(wp - pose[:2])) > 0.45 else SMALL_FORWARD
+        if self.env.task.collision:
+            action = unstick(self.rng)
+            if action is not None:
+                return action
+        return steer(pose, wp, self.turn)
 
     def turn(self, err: float) -> int:
         """Rotation action towards a heading error (radians, left positive): the shorter way, or left when scanning."""
         if self.scan and abs(err) > half_view(self.env):
             return LEFT
-        return _turn(err)
+        return turn_action(err)
 
     def act(self, timestep=None) -> int:
         """The expert's action for the environment's current state."""

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, mapping, roomnav
+from leaps_mj.environment import expert, mapping, render, roomnav
 from leaps_mj.world import rooms
 
 #: Steps between two goal choices of a :class:`GoalDriver` (it walks to the last goal in between).
@@ -40,6 +40,7 @@ MARGIN = 12
 ARRIVED = 0.35
 _STEPS = ((-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0),
           (-1, -1, math.sqrt(2)), (-1, 1, math.sqrt(2)), (1, -1, math.sqrt(2)), (1, 1, math.sqrt(2)))
+_NEIGHBOURS = tuple((di, dj) for di, dj, _length in _STEPS)
 
 
 def path_distances(free: np.ndarray, goal: tuple[int, int]) -> np.ndarray:
@@ -124,15 +125,7 @@ class MapNavigator:
                 break
         else:
             return np.asarray(goal_xy[:2], np.float64)
-        for _ in range(LOOKAHEAD):
-            best = (dist[i, j], i, j)
-            for di, dj, _length in _STEPS:
-                a, b = i + di, j + dj
-                if 0 <= a < dist.shape[0] and 0 <= b < dist.shape[1] and dist[a, b] < best[0]:
-                    best = (dist[a, b], a, b)
-            if best[1:] == (i, j):
-                break
-            _, i, j = best
+        i, j = expert.descend(dist, i, j, LOOKAHEAD, _NEIGHBOURS)
         x, y = m.world(i + r0, j + c0)
         return np.array([float(x), float(y)])
 
@@ -144,15 +137,11 @@ class MapNavigator:
         """
         if collided:
             self.bumped(pose)
-            if self.rng.random() < 0.5:
-                return int(self.rng.choice([expert.LEFT, expert.RIGHT, expert.SMALL_FORWARD]))
+            action = expert.unstick(self.rng)
+            if action is not None:
+                return action
         wp = self.waypoint(pose, goal_xy)
-        if wp is None:
-            return None
-        err = math.remainder(math.atan2(wp[1] - pose[1], wp[0] - pose[0]) - float(pose[2]), 2 * math.pi)
-        if abs(err) > math.radians(16):
-            return expert._turn(err)
-        return expert.FORWARD if math.hypot(wp[0] - pose[0], wp[1] - pose[1]) > 0.45 else expert.SMALL_FORWARD
+        return None if wp is None else expert.steer(pose, wp)
 
 
 class GoalDriver:
@@ -198,12 +187,20 @@ class GoalDriver:
         self._fraction = 0.0
 
     def observe(self, observation) -> np.ndarray:
-        """Adds the step's frame to the map; returns the egocentric map (C, WINDOW, WINDOW)."""
-        seg = np.asarray(observation["segmentation"])
+        """Adds the step's frame to the map; returns the egocentric map (C, WINDOW, WINDOW).
+
+        Frames of an integer multiple of the driver's resolution are subsampled to it
+        (:func:`leaps_mj.environment.render.subsample`).
+
+        Raises:
+          ValueError: for frames of another size.
+        """
+        width, height = self.mapper.width, self.mapper.height
+        seg = render.subsample(observation["segmentation"], width, height)
         self.pose = np.asarray(observation["pose"], np.float64)
         self._collided = bool(observation["collision"]) and self.steps > 0
         self._fraction = float(self._see[seg].mean())
-        return self.mapper.update(seg, observation["depth"], self.pose)
+        return self.mapper.update(seg, render.subsample(observation["depth"], width, height), self.pose)
 
     def needs_goal(self) -> bool:
         """Whether this step chooses a new goal: the first step, then after :data:`REPLAN` steps (and,
@@ -238,7 +235,7 @@ class GoalDriver:
         k = int(np.argmin(distance))
         err = math.remainder(math.atan2(y[k] - self.pose[1], x[k] - self.pose[0]) - self.pose[2], 2 * math.pi)
         if abs(err) > math.radians(10):
-            return expert._turn(err)
+            return expert.turn_action(err)
         if self._fraction >= SEE_FRACTION:
             return expert.STAY
         return expert.SMALL_FORWARD if distance[k] > 1.0 else expert.STAY

@@ -30,10 +30,9 @@ from __future__ import annotations
 import os
 import pathlib
 
-import numpy as np
 import torch
 
-from leaps_mj.environment import map_navigation, mapping, render
+from leaps_mj.environment import map_navigation, mapping
 from leaps_mj.learning import nets
 from leaps_mj.world import rooms
 
@@ -112,9 +111,7 @@ class GoalSubPolicy:
         """
         if self._driver is None:
             raise ValueError("call reset(target) before act()")
-        obs = timestep.observation
-        frames = {k: render.subsample(obs[k], self.width, self.height) for k in ("segmentation", "depth")}
-        window = self._driver.observe({**frames, "pose": obs["pose"], "collision": obs["collision"]})
+        window = self._driver.observe(timestep.observation)
         if self._driver.needs_goal():
             logits = self.net(torch.as_tensor(window[None]), torch.tensor([self._driver.node]))
             self._driver.set_goal(int(logits.argmax()))

@@ -397,13 +397,6 @@ def plot_samples(data: dict, path: str | os.PathLike) -> None:
 # -- command line ------------------------------------------------------------------------------------
 
 
-def _parse_ints(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m leaps_mj.train classifier", description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -413,11 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more epochs (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
-    for field in dataclasses.fields(TrainConfig):
-        kind = _parse_ints if isinstance(field.default, tuple) else type(field.default)
-        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind, default=None,
-                           metavar=type(field.default).__name__.upper())
+    trainer_lib.add_config_arguments(parser, TrainConfig)
     return parser
 
 
@@ -426,9 +415,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in ("threads", "stop_after"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} {getattr(args, name)}: expected a positive integer")
-    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
-                 if getattr(args, f.name) is not None}
-    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    config = dataclasses.replace(PRESETS[args.preset], **trainer_lib.config_overrides(args, TrainConfig))
     torch.set_num_threads(args.threads)
     trainer = Trainer(config, args.out, progress=not args.no_progress)
     best = trainer.train(args.stop_after)

@@ -366,17 +366,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     backend_options.add_backend_arguments(parser, "training episodes", "each playing batch_episodes / N episodes per "
                                    "update (default: one per cluster CPU, at most batch_episodes)")
-    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
-    for field in dataclasses.fields(TrainConfig):
-        if field.name != "subpolicy":
-            group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=type(field.default),
-                               default=None, metavar=type(field.default).__name__.upper())
+    trainer_lib.add_config_arguments(parser, TrainConfig, skip=("subpolicy",))
     args = parser.parse_args(argv)
     for name in ("threads", "stop_after"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} {getattr(args, name)}: expected a positive integer")
-    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
-                 if f.name != "subpolicy" and getattr(args, f.name) is not None}
+    overrides = trainer_lib.config_overrides(args, TrainConfig, skip=("subpolicy",))
     subpolicy = resolve_subpolicy(args.subpolicy)
     if subpolicy == "learned":
         from leaps_mj.learning import policies

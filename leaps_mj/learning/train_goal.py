@@ -242,6 +242,7 @@ class GoalTrainer(trainer_lib.Trainer):
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr)
         self.data_dir = self.out / "data"
         self._pool = None
+        self._data: dict[str, np.ndarray] | None = None  # the aggregated dataset, once read
 
     def session(self):
         self._pool = concurrent.futures.ProcessPoolExecutor(
@@ -259,10 +260,15 @@ class GoalTrainer(trainer_lib.Trainer):
         parts = [f.result() for f in futures]
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
-    def _dataset(self) -> dict[str, np.ndarray]:
-        files = [self.data_dir / f"round_{k:03d}.npz" for k in range(self.iteration + 1)]
-        parts = [np.load(f) for f in files]
-        return {k: np.concatenate([p[k] for p in parts]) for k in ("maps", "node", "label")}
+    def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Every round's samples so far, this round's (``fresh``) last: earlier rounds are read from
+        disk once (after a resume), then kept in memory."""
+        keys = ("maps", "node", "label")
+        if self._data is None:
+            parts = [np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
+            self._data = {k: np.concatenate([p[k] for p in parts]) if parts else fresh[k][:0] for k in keys}
+        self._data = {k: np.concatenate([self._data[k], fresh[k]]) for k in keys}
+        return self._data
 
     def iterate(self) -> dict:
         c = self.config
@@ -273,7 +279,7 @@ class GoalTrainer(trainer_lib.Trainer):
         buffer = io.BytesIO()
         np.savez_compressed(buffer, **fresh)
         dataset_lib.write_atomic(self.data_dir / f"round_{self.iteration:03d}.npz", buffer.getvalue())
-        data = self._dataset()
+        data = self._dataset(fresh)
         rng = np.random.default_rng(c.seed + self.iteration)
         self.model.train()
         losses, correct, seen = [], 0, 0
@@ -345,19 +351,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more rounds (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
-    for field in dataclasses.fields(GoalTrainConfig):
-        kind = trainer_lib.parse_bool if isinstance(field.default, bool) else type(field.default)
-        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind,
-                           default=None, metavar=type(field.default).__name__.upper())
+    trainer_lib.add_config_arguments(parser, GoalTrainConfig)
     return parser
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(GoalTrainConfig)
-                 if getattr(args, f.name) is not None}
-    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    config = dataclasses.replace(PRESETS[args.preset], **trainer_lib.config_overrides(args, GoalTrainConfig))
     if args.threads < 1:
         raise ValueError(f"--threads {args.threads}: expected a positive integer")
     if args.stop_after is not None and args.stop_after < 1:

@@ -315,13 +315,6 @@ def run_target(config: TrainConfig, target: str, out: str | os.PathLike, device:
 # -- command line --------------------------------------------------------------------------------
 
 
-def _parse_ints(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
-
-
 def parse_targets(text: str, use_semantic: bool) -> tuple[str, ...]:
     """The targets of ``--target``: "all" or comma-separated names.
 
@@ -360,20 +353,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     backend_options.add_backend_arguments(parser, "rollouts", "each holding num_envs / N environments (default: one per "
                                    "cluster CPU, at most num_envs)")
-    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
-    for field in dataclasses.fields(TrainConfig):
-        default = field.default
-        kind = {bool: trainer_lib.parse_bool, tuple: _parse_ints}.get(type(default), type(default))
-        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind, default=None,
-                           metavar=type(default).__name__.upper())
+    trainer_lib.add_config_arguments(parser, TrainConfig)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    overrides = {f.name: getattr(args, f.name) for f in dataclasses.fields(TrainConfig)
-                 if getattr(args, f.name) is not None}
-    config = dataclasses.replace(PRESETS[args.preset], **overrides)
+    config = dataclasses.replace(PRESETS[args.preset], **trainer_lib.config_overrides(args, TrainConfig))
     targets = parse_targets(args.target, config.use_semantic)
     if args.stop_after is not None and args.stop_after < 1:
         raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")

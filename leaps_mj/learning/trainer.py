@@ -48,6 +48,33 @@ def parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"{text!r}: expected true or false")
 
 
+def parse_ints(text: str) -> tuple[int, ...]:
+    """A command-line tuple of integers: comma-separated."""
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
+
+
+def add_config_arguments(parser: argparse.ArgumentParser, config_class, skip: tuple[str, ...] = ()) -> None:
+    """One ``--field-name`` option per field of a trainer's config dataclass (default None: the preset's
+    value), typed by the field's default: booleans as true / false, tuples as comma-separated integers."""
+    group = parser.add_argument_group("configuration overrides (default: the preset's value)")
+    for field in dataclasses.fields(config_class):
+        if field.name in skip:
+            continue
+        default = field.default
+        kind = {bool: parse_bool, tuple: parse_ints}.get(type(default), type(default))
+        group.add_argument(f"--{field.name.replace('_', '-')}", dest=field.name, type=kind, default=None,
+                           metavar=type(default).__name__.upper())
+
+
+def config_overrides(args: argparse.Namespace, config_class, skip: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The config fields given on the command line (by :func:`add_config_arguments`)."""
+    return {f.name: getattr(args, f.name) for f in dataclasses.fields(config_class)
+            if f.name not in skip and getattr(args, f.name) is not None}
+
+
 def plain(value: Any) -> Any:
     """``value`` as JSON values (tuples become lists), as a checkpoint stores it."""
     return json.loads(json.dumps(value))

@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, goal_teacher, looking_expert, map_navigation, observable_expert, render
+from leaps_mj.environment import expert, goal_teacher, looking_expert, map_navigation, observable_expert
 from leaps_mj.planning import semantic
 from leaps_mj.world import rooms
 
@@ -224,9 +224,7 @@ class MapOracleAgent:
         self.driver.reset(self.seed)
 
     def step(self, timestep) -> int:
-        obs = timestep.observation
-        frames = {k: render.subsample(obs[k], self.width, self.height) for k in ("segmentation", "depth")}
-        self.driver.observe({**frames, "pose": obs["pose"], "collision": obs["collision"]})
+        self.driver.observe(timestep.observation)
         if self.driver.needs_goal():
             self.driver.set_goal(self.teacher.cell(self.driver.mapper, self.driver.pose))
         return self.driver.act()
