@@ -219,3 +219,21 @@ def test_a_committed_driver_finishes_its_turn_before_choosing_again():
     assert every.needs_goal() and not committed.needs_goal()
     committed._last_action = expert.FORWARD
     assert committed.needs_goal()
+
+
+def test_a_network_reading_the_context_window_trains_and_drives_with_it(tiny_dataset, tmp_path, env):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=1, episodes=2,
+                                 context=True, cues=True)
+    train_goal.GoalTrainer(config, tmp_path, progress=False).train()
+    data = np.load(tmp_path / "data" / "round_000.npz")
+    assert data["maps"].shape[1] * 8 >= 2 * len(mapping.CHANNELS) * mapping.WINDOW ** 2
+    policy = goal_policy.GoalSubPolicy(tmp_path)
+    assert policy.net.config.context and policy.net.config.cues
+    ts = env.reset()
+    policy.reset("outdoor")
+    assert 0 <= policy.act(ts) < rooms.NUM_ACTIONS
+    driver = policy._drivers["outdoor"]
+    assert driver.context and driver.mapper._channel_of[rooms.seg_class_index("fence")] == mapping.CHANNELS.index(
+        "target")
+    with pytest.raises(ValueError, match="context must be a bool"):
+        nets.GoalNetConfig(context=1)

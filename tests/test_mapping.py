@@ -140,3 +140,36 @@ def test_training_env_and_sub_policy_build_the_same_maps(tiny_dataset, tmp_path)
     for built, trained in zip(seen, maps):
         np.testing.assert_array_equal(built, trained)
     assert maps[-1][channel("visited")].sum() >= 2 and maps[-1][channel("floor")].any()
+
+
+def test_the_context_window_sees_twice_as_far_at_half_the_resolution():
+    mapper = mapping.EgoMapper("kitchen", W, H)
+    seg, depth = wall_frame(6.0)  # 6 m ahead: beyond the fine window's 4 m, inside the coarse one's 8 m
+    window = mapper.update(seg, depth, (0.5, 2.0, 1.1))
+    context = mapper.context((0.5, 2.0, 1.1))
+    assert context.shape == window.shape and context.dtype == np.uint8
+    assert not window[channel("obstacle")].any()
+    rows, cols = np.nonzero(context[channel("obstacle")])
+    # 6 m ahead = 12 coarse cells above the agent; the view's ±4.6 m across are ±9-10 coarse cells.
+    assert set(rows) <= {MID - 13, MID - 12} and cols.min() >= MID - 10 and cols.max() <= MID + 9
+    # A wall 2 m ahead fills fine cells and the coarse cells covering them, at half the distance.
+    mapper.reset()
+    seg, depth = wall_frame(2.0)
+    window = mapper.update(seg, depth, (0.0, 0.0, 0.0))
+    context = mapper.context((0.0, 0.0, 0.0))
+    fine_rows = set(np.nonzero(window[channel("obstacle")])[0])
+    coarse_rows = set(np.nonzero(context[channel("obstacle")])[0])
+    assert coarse_rows == {MID - (MID - r + 1) // 2 for r in fine_rows}
+
+
+def test_cues_mark_the_outdoor_fences_and_trees_as_its_target():
+    seg, depth = wall_frame(2.0)
+    seg[:, : W // 2] = rooms.seg_class_index("fence")
+    seg[:, W // 2:] = rooms.seg_class_index("tree")
+    plain = mapping.EgoMapper("outdoor", W, H).update(seg, depth, (0.0, 0.0, 0.0))
+    cued = mapping.EgoMapper("outdoor", W, H, cues=True).update(seg, depth, (0.0, 0.0, 0.0))
+    assert not plain[channel("target")].any() and plain[channel("obstacle")].any()
+    assert cued[channel("target")].any() and not cued[channel("obstacle")].any()
+    # Other nodes have no cues: the flag changes nothing for them.
+    kitchen = [mapping.EgoMapper("kitchen", W, H, cues=c).update(seg, depth, (0.0, 0.0, 0.0)) for c in (0, 1)]
+    np.testing.assert_array_equal(*kitchen)

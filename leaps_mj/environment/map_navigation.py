@@ -161,13 +161,18 @@ class GoalDriver:
         :data:`REPLAN` steps. Choosing mid-turn lets a learned goal flip
         between two doors as the view turns: the agent then turns left and
         right on the spot (session 8, docs/training.md).
+      context: :meth:`observe` also returns the coarse 16 m window
+        (:meth:`leaps_mj.environment.mapping.EgoMapper.context`) below the fine one.
+      cues: The map marks the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
     """
 
-    def __init__(self, target: str, width: int, height: int, seed: int = 0, commit_turns: bool = True):
+    def __init__(self, target: str, width: int, height: int, seed: int = 0, commit_turns: bool = True,
+                 context: bool = False, cues: bool = False):
         self.target = target
         self.commit_turns = commit_turns
+        self.context = context
         self.node = rooms.GRAPH_NODES.index(target)
-        self.mapper = mapping.EgoMapper(target, width, height)
+        self.mapper = mapping.EgoMapper(target, width, height, cues)
         self.navigator = MapNavigator(self.mapper, seed)
         see = [rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS.get(target, ())]
         self._see = np.zeros(rooms.NUM_SEG_CLASSES, bool)
@@ -187,7 +192,8 @@ class GoalDriver:
         self._fraction = 0.0
 
     def observe(self, observation) -> np.ndarray:
-        """Adds the step's frame to the map; returns the egocentric map (C, WINDOW, WINDOW).
+        """Adds the step's frame to the map; returns the egocentric map (C, WINDOW, WINDOW), with
+        ``context`` the coarse window's C channels after the fine window's (2C, WINDOW, WINDOW).
 
         Frames of an integer multiple of the driver's resolution are subsampled to it
         (:func:`leaps_mj.environment.render.subsample`).
@@ -200,7 +206,8 @@ class GoalDriver:
         self.pose = np.asarray(observation["pose"], np.float64)
         self._collided = bool(observation["collision"]) and self.steps > 0
         self._fraction = float(self._see[seg].mean())
-        return self.mapper.update(seg, render.subsample(observation["depth"], width, height), self.pose)
+        window = self.mapper.update(seg, render.subsample(observation["depth"], width, height), self.pose)
+        return np.concatenate([window, self.mapper.context(self.pose)]) if self.context else window
 
     def needs_goal(self) -> bool:
         """Whether this step chooses a new goal: the first step, then after :data:`REPLAN` steps (and,

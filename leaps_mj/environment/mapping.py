@@ -17,9 +17,13 @@ Channels of the map (uint8, 1 where the cell holds it):
 0. ``obstacle``: wall, fence or furniture seen between :data:`OBSTACLE_BAND` metres high;
 1. ``floor``: floor seen (free space);
 2. ``door``: a door lintel seen (the doorways);
-3. ``target``: one of the target's see-objects (none for ``outdoor`` and ``indoor``);
+3. ``target``: one of the target's see-objects (none for ``indoor``; none for ``outdoor`` either, unless
+   the mapper marks its :data:`CUES`, fences and trees);
 4. ``furniture``: any other furniture;
 5. ``visited``: cells the agent stood in.
+
+:meth:`EgoMapper.context` reads the same channels out over a window twice as wide at half
+the resolution (:data:`CONTEXT_CELL`), for what was mapped beyond the 4 m around the agent.
 
 Beside them it keeps a ``blocked`` layer for planning on the map
 (:mod:`leaps_mj.environment.map_navigation`): every non-floor, non-door point
@@ -42,6 +46,11 @@ CELL = 0.25
 WINDOW = 32
 #: Cells on each side of the allocentric grid the frames are projected into (32 m, centred on the first pose).
 GRID = 128
+#: Side of a cell of :meth:`EgoMapper.context`'s coarse window (16 m across at WINDOW cells).
+CONTEXT_CELL = 2 * CELL
+#: Classes that mark a node on the map where it has no see-objects (with ``cues``): an outdoor
+#: area is fenced and has the trees.
+CUES = {"outdoor": ("fence", "tree")}
 #: Vertical field of view of the agent's camera (degrees; ``assets/agent.xml``).
 CAMERA_FOVY = 60.0
 #: Points farther than this (metres along the view axis) are not mapped: at 40x30 they are too coarse.
@@ -55,12 +64,13 @@ _UNMAPPED = [rooms.seg_class_index(c) for c in ("empty", "ceiling", "agent")]
 _FURNITURE = [rooms.seg_class_index(c) for c in rooms.FURNITURE_CLASSES]
 
 
-def _class_channels(target: str) -> np.ndarray:
+def _class_channels(target: str, cues: bool) -> np.ndarray:
     """Channel of each segmentation class's points (-1: not mapped; obstacles are decided by height)."""
     rooms.room_index(target)
     table = np.full(rooms.NUM_SEG_CLASSES, CHANNELS.index("obstacle"), np.int64)
     table[_FURNITURE] = CHANNELS.index("furniture")
-    table[[rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS.get(target, ())]] = CHANNELS.index("target")
+    marks = rooms.SEE_OBJECTS.get(target, ()) + (CUES.get(target, ()) if cues else ())
+    table[[rooms.seg_class_index(c) for c in marks]] = CHANNELS.index("target")
     table[_FLOOR] = CHANNELS.index("floor")
     table[_DOOR] = CHANNELS.index("door")
     table[_UNMAPPED] = -1
@@ -74,17 +84,18 @@ class EgoMapper:
       target: The graph node the run heads for (its see-objects fill the
         ``target`` channel).
       width, height: Resolution of the frames it is given.
+      cues: Also mark the target's :data:`CUES` in the ``target`` channel.
 
     Raises:
       ValueError: for an unknown target or a non-positive resolution.
     """
 
-    def __init__(self, target: str, width: int, height: int):
+    def __init__(self, target: str, width: int, height: int, cues: bool = False):
         if width < 1 or height < 1:
             raise ValueError(f"frame size {width}x{height}: expected positive width and height")
         self.target = target
         self.width, self.height = width, height
-        self._channel_of = _class_channels(target)
+        self._channel_of = _class_channels(target, cues)
         focal = (height / 2) / math.tan(math.radians(CAMERA_FOVY) / 2)
         cols = (np.arange(width) + 0.5 - width / 2) / focal
         rows = (height / 2 - np.arange(height) - 0.5) / focal
@@ -92,6 +103,10 @@ class EgoMapper:
         # Window cell (i, j) lies (WINDOW/2 - i - 0.5) cells ahead of the agent and (WINDOW/2 - j - 0.5) to its left.
         offsets = (WINDOW / 2 - np.arange(WINDOW) - 0.5) * CELL
         self._ahead, self._left = np.meshgrid(offsets, offsets, indexing="ij")
+        # The coarse window's cells, each sampled at the centres of the 2 x 2 fine cells it covers.
+        coarse = (WINDOW / 2 - np.arange(WINDOW) - 0.5) * CONTEXT_CELL
+        self._context = [np.meshgrid(coarse + da, coarse + dl, indexing="ij")
+                         for da in (-CELL / 2, CELL / 2) for dl in (-CELL / 2, CELL / 2)]
         self._grid = np.zeros((len(CHANNELS), GRID, GRID), np.uint8)
         self.blocked = np.zeros((GRID, GRID), bool)
         self._origin: np.ndarray | None = None
@@ -133,6 +148,18 @@ class EgoMapper:
         px, py, yaw = (float(v) for v in pose)
         cos, sin = math.cos(yaw), math.sin(yaw)
         return px + self._ahead * cos - self._left * sin, py + self._ahead * sin + self._left * cos
+
+    def context(self, pose) -> np.ndarray:
+        """The map around ``pose`` over a window of WINDOW cells of :data:`CONTEXT_CELL` (16 m across),
+        oriented as :meth:`update`'s: (len(CHANNELS), WINDOW, WINDOW) uint8, a coarse cell 1 where
+        any of the fine cells it covers is."""
+        px, py, yaw = (float(v) for v in pose)
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        window = np.zeros((len(CHANNELS), WINDOW, WINDOW), np.uint8)
+        for ahead, left in self._context:
+            row, col, inside = self.cells(px + ahead * cos - left * sin, py + ahead * sin + left * cos)
+            window[:, inside] |= self._grid[:, row[inside], col[inside]]
+        return window
 
     def window_cell(self, pose, x: float, y: float) -> tuple[int, int]:
         """The egocentric window cell (row, column) holding world point (x, y) seen from ``pose``,

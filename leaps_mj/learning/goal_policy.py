@@ -98,7 +98,9 @@ class GoalSubPolicy:
         if target not in rooms.GRAPH_NODES:
             raise ValueError(f"no sub-policy for target {target!r}; expected one of {list(rooms.GRAPH_NODES)}")
         if target not in self._drivers:
-            self._drivers[target] = map_navigation.GoalDriver(target, self.width, self.height)
+            config = self.net.config
+            self._drivers[target] = map_navigation.GoalDriver(target, self.width, self.height,
+                                                              context=config.context, cues=config.cues)
         self._driver = self._drivers[target]
         self._driver.reset(self._seed)
 

@@ -167,6 +167,10 @@ class GoalNetConfig:
       window: Cells on each side of the egocentric map; the network scores
         each of its ``window ** 2`` cells as the next goal.
       num_nodes: Graph nodes it serves (one-hot input).
+      context: Whether it also reads the coarse 16 m window around the agent
+        (``EgoMapper.context``; its channels follow the fine window's).
+      cues: Whether its maps mark the target's cues (``mapping.CUES``: fences
+        and trees for ``outdoor``).
     """
 
     width: int = 40
@@ -176,12 +180,22 @@ class GoalNetConfig:
     map_channels: int = 6
     window: int = 32
     num_nodes: int = len(rooms.GRAPH_NODES)
+    context: bool = False
+    cues: bool = False
+
+    @property
+    def input_channels(self) -> int:
+        """Channels of the maps it reads: the fine window's, and with ``context`` the coarse window's."""
+        return self.map_channels * (2 if self.context else 1)
 
     def __post_init__(self):
         object.__setattr__(self, "channels", tuple(self.channels))
         _check_positive_tuple("channels", self.channels)
         for name in ("width", "height", "hidden", "map_channels", "window", "num_nodes"):
             _check_positive(name, getattr(self, name))
+        for name in ("context", "cues"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.window % 2 ** len(self.channels):
             raise ValueError(f"window {self.window} must be a multiple of 2 ** {len(self.channels)} "
                              f"(one halving per conv layer)")

@@ -474,7 +474,7 @@ class GoalNet(_Net):
     def __init__(self, config: GoalNetConfig = GoalNetConfig()):
         super().__init__()
         self.config = config
-        layers, in_channels = [], config.map_channels
+        layers, in_channels = [], config.input_channels
         for channels in config.channels:
             layers += [_layer_init(nn.Conv2d(in_channels, channels, 3, 2, 1)), nn.ReLU()]
             in_channels = channels
@@ -491,7 +491,7 @@ class GoalNet(_Net):
           ValueError: for maps or node indices of another shape or range.
         """
         cfg = self.config
-        shape = (cfg.map_channels, cfg.window, cfg.window)
+        shape = (cfg.input_channels, cfg.window, cfg.window)
         if egomap.dim() != 4 or tuple(egomap.shape[1:]) != shape:
             raise ValueError(f"egomap has shape {tuple(egomap.shape)}; expected (B, {shape[0]}, {shape[1]}, {shape[2]})")
         if tuple(node.shape) != egomap.shape[:1] or (node.numel() and not 0 <= int(node.min()) <= int(node.max())

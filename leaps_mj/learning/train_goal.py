@@ -70,6 +70,9 @@ class GoalTrainConfig:
         which way the agent faces (with ``mirror``, the 8 symmetries of the square).
       label_sigma: Spread (cells) of the goal label: 0 trains on the teacher's one cell, above 0 on a
         Gaussian over the cells around it (neighbouring cells lead the same way).
+      context: Whether the network also reads the coarse 16 m window around the agent
+        (:meth:`leaps_mj.environment.mapping.EgoMapper.context`).
+      cues: Whether the maps mark the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
       commit_turns: Whether the collecting drivers finish a turn before choosing the next goal
         (:class:`leaps_mj.environment.map_navigation.GoalDriver`); the shipped network was collected
         without (False), the sub-policy acts with it.
@@ -93,11 +96,18 @@ class GoalTrainConfig:
     mirror: bool = False
     rotate: bool = False
     label_sigma: float = 0.0
+    context: bool = False
+    cues: bool = False
     commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
     max_start_distance: float = 13.0
     seed: int = 0
+
+    @property
+    def net_config(self) -> nets.GoalNetConfig:
+        """The architecture of the network this run trains."""
+        return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
@@ -147,7 +157,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     rng = np.random.default_rng(seed)
     net = None
     if state_dict is not None:
-        net = nets.GoalNet(nets.GoalNetConfig(width=config.width, height=config.height))
+        net = nets.GoalNet(config.net_config)
         net.load_state_dict(state_dict)
         net.eval()
     env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
@@ -160,8 +170,9 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
         for _ in range(episodes):
             ts = env.reset()
             target = env.task.episode.target
-            driver = drivers.setdefault(target, map_navigation.GoalDriver(target, config.width, config.height,
-                                                                         commit_turns=config.commit_turns))
+            driver = drivers.setdefault(target, map_navigation.GoalDriver(
+                target, config.width, config.height, commit_turns=config.commit_turns, context=config.context,
+                cues=config.cues))
             driver.reset(int(rng.integers(2 ** 31)))
             by_teacher = net is None or rng.random() < beta
             while not ts.last():
@@ -222,9 +233,9 @@ def rotate(maps: torch.Tensor, labels: torch.Tensor, turns: torch.Tensor) -> tup
     return out_maps, out_labels
 
 
-def _unpack(maps: np.ndarray) -> torch.Tensor:
-    """Bit-packed maps (N, bytes) back to (N, C, WINDOW, WINDOW) uint8 tensors."""
-    shape = (len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
+def _unpack(maps: np.ndarray, channels: int) -> torch.Tensor:
+    """Bit-packed maps (N, bytes) back to (N, channels, WINDOW, WINDOW) uint8 tensors."""
+    shape = (channels, mapping.WINDOW, mapping.WINDOW)
     bits = np.unpackbits(maps, axis=1, count=int(np.prod(shape)))
     return torch.as_tensor(bits.reshape(-1, *shape))
 
@@ -238,7 +249,7 @@ class GoalTrainer(trainer_lib.Trainer):
     def __init__(self, config: GoalTrainConfig, out: str | os.PathLike, progress: bool = True):
         super().__init__(config, out, config.rounds, progress=progress, desc="goal rounds")
         torch.manual_seed(config.seed)
-        self.model = nets.GoalNet(nets.GoalNetConfig(width=config.width, height=config.height))
+        self.model = nets.GoalNet(config.net_config)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr)
         self.data_dir = self.out / "data"
         self._pool = None
@@ -287,7 +298,8 @@ class GoalTrainer(trainer_lib.Trainer):
             order = rng.permutation(len(data["label"]))
             for start in range(0, len(order), c.batch):
                 idx = np.sort(order[start:start + c.batch])
-                maps, labels = _unpack(data["maps"][idx]), torch.as_tensor(data["label"][idx])
+                maps = _unpack(data["maps"][idx], self.model.config.input_channels)
+                labels = torch.as_tensor(data["label"][idx])
                 if c.mirror:
                     maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
                 if c.rotate:
