@@ -237,3 +237,16 @@ def test_a_network_reading_the_context_window_trains_and_drives_with_it(tiny_dat
         "target")
     with pytest.raises(ValueError, match="context must be a bool"):
         nets.GoalNetConfig(context=1)
+
+
+def test_max_updates_caps_the_learners_minibatches_per_round(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=2, episodes=2)
+    steps = {}
+    for cap in (0, 1):
+        trainer = train_goal.GoalTrainer(dataclasses.replace(config, max_updates=cap), tmp_path / str(cap),
+                                         progress=False)
+        trainer.train()
+        steps[cap] = int(next(iter(trainer.optimizer.state.values()))["step"])
+    assert steps[1] == 2 < steps[0]
+    with pytest.raises(ValueError, match="max_updates"):
+        dataclasses.replace(config, max_updates=-1)

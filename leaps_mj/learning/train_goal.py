@@ -61,6 +61,10 @@ class GoalTrainConfig:
       episodes: Episodes collected per round (all workers together).
       beta: Probability that the teacher's goals drive an episode after round 0.
       epochs: Passes over the whole dataset after each round.
+      max_updates: At most this many minibatch updates per round (0: no cap). Capped, a round's
+        passes stop early and train on a uniform random part of the dataset, so the learner's time
+        per round stops growing with the dataset (uncapped, a run's learning time grows with the
+        square of its rounds).
       batch: Minibatch size.
       lr: Adam learning rate.
       mirror: Also train on each map mirrored left-right with its goal mirrored (a symmetry of the
@@ -91,6 +95,7 @@ class GoalTrainConfig:
     episodes: int = 240
     beta: float = 0.25
     epochs: int = 3
+    max_updates: int = 0
     batch: int = 256
     lr: float = 1e-3
     mirror: bool = False
@@ -115,8 +120,10 @@ class GoalTrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} {value!r}: expected a positive integer")
-        if not isinstance(self.num_houses, int) or self.num_houses < 0:
-            raise ValueError(f"num_houses {self.num_houses!r}: expected an integer >= 0")
+        for name in ("num_houses", "max_updates"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name} {value!r}: expected an integer >= 0")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
@@ -294,24 +301,27 @@ class GoalTrainer(trainer_lib.Trainer):
         rng = np.random.default_rng(c.seed + self.iteration)
         self.model.train()
         losses, correct, seen = [], 0, 0
-        for _ in range(c.epochs):
-            order = rng.permutation(len(data["label"]))
-            for start in range(0, len(order), c.batch):
-                idx = np.sort(order[start:start + c.batch])
-                maps = _unpack(data["maps"][idx], self.model.config.input_channels)
-                labels = torch.as_tensor(data["label"][idx])
-                if c.mirror:
-                    maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
-                if c.rotate:
-                    maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
-                logits = self.model(maps, torch.as_tensor(data["node"][idx]))
-                loss = goal_loss(logits, labels, c.label_sigma)
-                self.optimizer.zero_grad()
-                loss.backward()
-                self.optimizer.step()
-                losses.append(loss.item())
-                correct += int((logits.argmax(1) == labels).sum())
-                seen += len(idx)
+        batches = [start for _ in range(c.epochs) for start in range(0, len(data["label"]), c.batch)]
+        if c.max_updates:
+            batches = batches[:c.max_updates]
+        for start in batches:
+            if start == 0:
+                order = rng.permutation(len(data["label"]))
+            idx = np.sort(order[start:start + c.batch])
+            maps = _unpack(data["maps"][idx], self.model.config.input_channels)
+            labels = torch.as_tensor(data["label"][idx])
+            if c.mirror:
+                maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
+            if c.rotate:
+                maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
+            logits = self.model(maps, torch.as_tensor(data["node"][idx]))
+            loss = goal_loss(logits, labels, c.label_sigma)
+            self.optimizer.zero_grad()
+            loss.backward()
+            self.optimizer.step()
+            losses.append(loss.item())
+            correct += int((logits.argmax(1) == labels).sum())
+            seen += len(idx)
         self.model.eval()
         learner = ~fresh["teacher"]
         return {"samples": len(data["label"]), "fresh_samples": len(fresh["label"]),
