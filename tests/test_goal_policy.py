@@ -146,8 +146,18 @@ def test_trainer_writes_the_network_and_a_killed_run_resumes_to_the_same_bytes(t
     resumed = train_goal.GoalTrainer(config, tmp_path / "parts", progress=False)
     assert resumed.resume(config.width, config.height) and resumed.iteration == 1
     resumed.train()
-    for a, b in zip(whole.model.state_dict().values(), resumed.model.state_dict().values()):
-        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    # A finished one-round run, extended to two rounds, is the two-round run; it cannot shrink.
+    short = train_goal.GoalTrainer(dataclasses.replace(config, rounds=1), tmp_path / "extended", progress=False)
+    short.train()
+    assert short.finished
+    extended = train_goal.GoalTrainer(config, tmp_path / "extended", progress=False)
+    assert extended.resume(config.width, config.height) and not extended.finished
+    extended.train()
+    for other in (resumed, extended):
+        for a, b in zip(whole.model.state_dict().values(), other.model.state_dict().values()):
+            torch.testing.assert_close(a, b, rtol=0, atol=0)
+    with pytest.raises(ValueError, match="rounds: saved 2, given 1"):
+        train_goal.GoalTrainer(dataclasses.replace(config, rounds=1), tmp_path / "extended").resume()
     net, extra = goal_policy.load_goal_net(tmp_path / "whole" / goal_policy.GOAL)
     assert extra["round"] == 2 and isinstance(net, nets.GoalNet)
     data = np.load(tmp_path / "whole" / "data" / "round_001.npz")

@@ -1,6 +1,7 @@
 """Train the map-goal sub-policy's network by DAgger in rounds over an aggregated dataset.
 
-``python -m leaps_mj.train goal --out runs/goal`` (resumable: rerun the same command after a kill)
+``python -m leaps_mj.train goal --out runs/goal`` (resumable: rerun the same command after a kill;
+rerun it with more ``--rounds`` to extend a finished run)
 
 Each round, worker processes run training episodes (hop-like: starts at
 most ``max_start_doors`` doors from a room of the target, ``horizon`` steps,
@@ -252,6 +253,7 @@ class GoalTrainer(trainer_lib.Trainer):
 
     unit = "round"
     loss_keys = frozenset({"loss", "accuracy"})
+    growable = frozenset({"rounds"})  # nothing is scheduled over the rounds: a finished run can go on
 
     def __init__(self, config: GoalTrainConfig, out: str | os.PathLike, progress: bool = True):
         super().__init__(config, out, config.rounds, progress=progress, desc="goal rounds")

@@ -80,7 +80,7 @@ def plain(value: Any) -> Any:
     return json.loads(json.dumps(value))
 
 
-def check_same_config(path, saved: dict, config) -> None:
+def check_same_config(path, saved: dict, config, growable: frozenset[str] = frozenset()) -> None:
     """Refuses to resume a run under another configuration.
 
     A field the checkpoint lacks (added to the dataclass after it was
@@ -91,13 +91,15 @@ def check_same_config(path, saved: dict, config) -> None:
       path: the checkpoint being resumed (named in the error).
       saved: the configuration stored in it (a dict).
       config: the configuration dataclass given now.
+      growable: fields that may be given larger than saved (a run extended).
 
     Raises:
       ValueError: naming every differing field with its saved and given value.
     """
     defaults = {f.name: f.default for f in dataclasses.fields(config) if f.default is not dataclasses.MISSING}
     saved, given = plain({**defaults, **saved}), plain(dataclasses.asdict(config))
-    diff = {k: (saved.get(k), v) for k, v in given.items() if saved.get(k) != v}
+    diff = {k: (saved.get(k), v) for k, v in given.items()
+            if saved.get(k) != v and not (k in growable and v > saved.get(k))}
     if diff:
         fields = ", ".join(f"{k}: saved {a!r}, given {b!r}" for k, (a, b) in diff.items())
         raise ValueError(f"{path} holds a run with another configuration ({fields}); "
@@ -154,6 +156,9 @@ class Trainer:
         ("iteration", "epoch", "update", "house").
       csv_fields: fixed CSV columns, or None for those of the first row.
       loss_keys: logged keys that go to TensorBoard's "losses" group (others to "charts").
+      growable: config fields a resumed run may be given larger than it was begun with, where the
+        run then goes on exactly as if begun with the larger value (a run's total, where nothing is
+        scheduled over it): a finished run is extended.
 
     Args:
       config: the run's configuration dataclass (stored and checked on resume).
@@ -168,6 +173,7 @@ class Trainer:
     unit = "iteration"
     csv_fields: tuple[str, ...] | None = None
     loss_keys: frozenset[str] = frozenset()
+    growable: frozenset[str] = frozenset()
     #: Set by trainers with a network (before :meth:`resume`).
     model = None
     optimizer = None
@@ -229,7 +235,7 @@ class Trainer:
             from leaps_mj.learning import nets
 
             model, _, extra = nets.load_policy(self.state_path, expect_width, expect_height)
-            check_same_config(self.state_path, extra["train_config"], self.config)
+            check_same_config(self.state_path, extra["train_config"], self.config, self.growable)
             self.model.load_state_dict(model.state_dict())
             if self.optimizer is not None:
                 self.optimizer.load_state_dict(extra["optimizer"])
@@ -238,7 +244,7 @@ class Trainer:
                 extra = json.loads(self.state_path.read_text())
             except json.JSONDecodeError as e:
                 raise ValueError(f"checkpoint {self.state_path} is not valid JSON: {e}") from None
-            check_same_config(self.state_path, extra["train_config"], self.config)
+            check_same_config(self.state_path, extra["train_config"], self.config, self.growable)
         self.iteration, self.elapsed = extra[self.unit], extra.get("elapsed", 0.0)
         self.load_state(extra)
         return True
