@@ -76,8 +76,9 @@ def env(tiny_dataset):
     e.close()
 
 
-def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env):
-    agent = registry.make_agent("oracle-map", env, seed=0)
+@pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable"])
+def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env, name):
+    agent = registry.make_agent(name, env, seed=0)
     agent.width, agent.height = W, H
     successes = 0
     for episode in range(4):
@@ -90,6 +91,39 @@ def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(
             ts = env.step(action)
         successes += env.task.success
     assert successes >= 2
+
+
+def test_observable_goals_follow_the_exploration_walk_until_the_target_room_is_seen(env):
+    agent = registry.make_agent("oracle-map-observable", env, seed=0)
+    agent.width, agent.height = W, H
+    geodesic = goal_teacher.TeacherGoals(env)
+    walked = finished = differ = 0
+    for _ in range(6):
+        ts = env.reset()
+        agent.reset(env.episode.target)
+        while not ts.last():
+            action = agent.step(ts)  # the teacher observed this step and chose its goal
+            teacher, pose = agent.teacher, agent.driver.pose
+            label = teacher.cell(agent.driver.mapper, pose)
+            if not teacher.expert.target_revealed() and teacher.expert.goal is not None:
+                walk = teacher.expert._door_field(*teacher.expert.goal)
+                assert label == teacher.goal_cell(*walk, agent.driver.mapper, pose)
+                walked += 1
+                differ += label != geodesic.cell(agent.driver.mapper, pose)
+            elif teacher.expert.target_rooms(env.episode.target) == ():
+                assert label == geodesic.cell(agent.driver.mapper, pose)  # all its rooms seen: the geodesic goal
+                finished += 1
+            ts = env.step(action)
+    assert walked and finished and differ  # exploring, it does not always head where the map leads
+
+
+def test_the_trainer_labels_with_the_teacher_its_config_names(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), teacher="observable")
+    shard, = train_goal.training_env.training_houses(config.dataset, None, 0, 1, tmp_path, name="goal")
+    samples = train_goal.collect(config, str(shard), seed=3, episodes=2, beta=1.0, state_dict=None)
+    assert len(samples["label"]) == len(samples["maps"]) > 0 and samples["teacher"].all()
+    with pytest.raises(ValueError, match="teacher 'map'"):
+        train_goal.GoalTrainConfig(teacher="map")
 
 
 def test_goal_net_shapes_and_errors():
@@ -229,6 +263,20 @@ def test_a_committed_driver_finishes_its_turn_before_choosing_again():
     assert every.needs_goal() and not committed.needs_goal()
     committed._last_action = expert.FORWARD
     assert committed.needs_goal()
+
+
+def test_a_committed_driver_looking_around_at_its_goal_chooses_again():
+    """At the goal with nothing of the target mapped it turns to look around; those turns are not a walk's,
+    so after REPLAN steps it takes a new goal (it used to turn there for the rest of the run)."""
+    driver = map_navigation.GoalDriver("outdoor", W, H)
+    pose = np.array([0.0, 0.0, 0.0])
+    _empty_step(driver, pose)
+    driver.set_goal(mapping.WINDOW // 2 * mapping.WINDOW + mapping.WINDOW // 2)  # its own cell: arrived
+    for _ in range(map_navigation.REPLAN):
+        assert not driver.needs_goal()
+        assert driver.act() == expert.LEFT
+        _empty_step(driver, pose)
+    assert driver.needs_goal()
 
 
 def test_a_network_reading_the_context_window_trains_and_drives_with_it(tiny_dataset, tmp_path, env):

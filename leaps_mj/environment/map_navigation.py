@@ -160,7 +160,9 @@ class GoalDriver:
         a goal is finished before another goal is chosen; otherwise every
         :data:`REPLAN` steps. Choosing mid-turn lets a learned goal flip
         between two doors as the view turns: the agent then turns left and
-        right on the spot (session 8, docs/training.md).
+        right on the spot (session 8, docs/training.md). Turns made at the
+        goal (looking around, or facing the target) do not hold the choice
+        back: a driver that commits would otherwise turn there for good.
       context: :meth:`observe` also returns the coarse 16 m window
         (:meth:`leaps_mj.environment.mapping.EgoMapper.context`) below the fine one.
       cues: The map marks the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
@@ -187,6 +189,7 @@ class GoalDriver:
         self.steps = 0
         self._since_goal = 0
         self._last_action: int | None = None
+        self._arrived = False  # whether the last action was taken at the goal (looking, not walking)
         self.pose = np.zeros(3)
         self._collided = False
         self._fraction = 0.0
@@ -214,7 +217,7 @@ class GoalDriver:
         with ``commit_turns``, not in the middle of a turn)."""
         if self.goal is None:
             return True
-        return self._since_goal >= REPLAN and not (self.commit_turns and self._last_action in TURNS)
+        return self._since_goal >= REPLAN and not (self.commit_turns and self._last_action in TURNS and not self._arrived)
 
     def set_goal(self, cell: int) -> None:
         """Heads for a cell of the egocentric map (row-major index into the window) around the current pose."""
@@ -232,6 +235,7 @@ class GoalDriver:
 
     def _action(self) -> int:
         action = self.navigator.act(self.pose, self.goal, self._collided) if self.goal is not None else None
+        self._arrived = action is None
         if action is not None:
             return action
         seen = np.argwhere(self.mapper.grid[mapping.CHANNELS.index("target")])

@@ -108,12 +108,23 @@ class ObservableExpert(expert.GeodesicExpert):
         task = self.env.task
         if task.sees():
             return expert.STAY
-        target = task.episode.target
-        if not any(r.type == target and r.id in self.revealed for r in task.house_model.house.rooms):
-            action = self._explore()
-            if action is not None:
-                return action
+        if not self.target_revealed():
+            walk = self.walk(self.env.physics.agent_pose())
+            if walk is not None:
+                return self.follow(*walk, self.env.physics.agent_pose())
         return super().act()
+
+    def target_revealed(self) -> bool:
+        """Whether a room of the episode's target type has been revealed (then the walk is the geodesic expert's)."""
+        task = self.env.task
+        return any(r.type == task.episode.target and r.id in self.revealed for r in task.house_model.house.rooms)
+
+    def target_rooms(self, target: str) -> tuple[int, ...]:
+        """The rooms of type ``target`` its finish steers to: the revealed ones, or () meaning all of them
+        (none revealed, or all)."""
+        ids = [r.id for r in self.env.task.house_model.house.rooms if r.type == target]
+        seen = tuple(i for i in ids if i in self.revealed)
+        return seen if len(seen) < len(ids) else ()
 
     def field(self, target: str, view: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The geodesic expert's field towards the *revealed* rooms of type ``target``.
@@ -121,10 +132,8 @@ class ObservableExpert(expert.GeodesicExpert):
         With none of them revealed (nothing left to explore) or all of them,
         it is the geodesic expert's own field.
         """
-        hm = self.env.task.house_model
-        ids = [r.id for r in hm.house.rooms if r.type == target]
-        seen = tuple(i for i in ids if i in self.revealed)
-        if not seen or len(seen) == len(ids):
+        seen = self.target_rooms(target)
+        if not seen:
             return super().field(target, view)
         return self._cached(("target", target, view, seen), lambda: self.target_field(target, view, seen))
 
@@ -137,10 +146,13 @@ class ObservableExpert(expert.GeodesicExpert):
             self._house_fields[key] = make()
         return self._house_fields[key]
 
-    def _explore(self) -> int | None:
-        """The next step of the exploration walk (choosing a new door where needed); None when all is explored."""
+    def walk(self, pose) -> tuple[np.ndarray, np.ndarray] | None:
+        """Steering field of the exploration walk at ``pose`` (choosing a new door where needed, dropping a
+        walk that arrived or ran out of patience); None when all is explored.
+
+        Call it once a step (after :meth:`observe`): a walk's patience counts the task's steps.
+        """
         task = self.env.task
-        pose = self.env.physics.agent_pose()
         if self.goal is not None and self._goal_unseen and self.goal[1] in self.revealed:
             self.goal = None  # its room came into view: doors to rooms still unseen go first now
         while True:
@@ -151,9 +163,8 @@ class ObservableExpert(expert.GeodesicExpert):
                 self._goal_step = task.steps
                 self._goal_unseen = self.goal[1] not in self.revealed
             field, nearest = self._door_field(*self.goal)
-            action = self.follow(field, nearest, pose)
-            if action is not None and task.steps - self._goal_step < DOOR_PATIENCE:
-                return action
+            if self.waypoint(field, nearest, pose[:2]) is not None and task.steps - self._goal_step < DOOR_PATIENCE:
+                return field, nearest
             self.passed.add(self.goal[0])  # arrived, or given up
             self.goal = None
 

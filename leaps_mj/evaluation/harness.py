@@ -103,6 +103,7 @@ AGENTS = {
     "oracle-scan": AgentSpec("oracle-scan", "oracle-scan"),
     "oracle-look": AgentSpec("oracle-look", "oracle-look"),
     "oracle-map": AgentSpec("oracle-map", "oracle-map"),
+    "oracle-map-observable": AgentSpec("oracle-map-observable", "oracle-map-observable"),
     "observable": AgentSpec("observable", "observable"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.

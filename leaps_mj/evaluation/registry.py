@@ -11,7 +11,8 @@ from __future__ import annotations
 from leaps_mj.planning import agents
 
 #: Agent names accepted by :func:`make_agent`.
-AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "observable", "controller", "aug")
+AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable",
+               "observable", "controller", "aug")
 
 
 def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: int = 0, **kwargs) -> agents.Agent:
@@ -47,6 +48,8 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
         return agents.LookingOracleAgent(env, seed)
     if name == "oracle-map":
         return agents.MapOracleAgent(env, seed)
+    if name == "oracle-map-observable":
+        return agents.ObservableMapOracleAgent(env, seed)
     if name == "observable":
         return agents.ObservableAgent(env, seed)
     if name == "aug":

@@ -48,6 +48,9 @@ from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import rooms
 
 
+#: The goal teachers by name (``GoalTrainConfig.teacher``).
+TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals}
+
 
 @dataclasses.dataclass(frozen=True)
 class GoalTrainConfig:
@@ -78,6 +81,10 @@ class GoalTrainConfig:
       context: Whether the network also reads the coarse 16 m window around the agent
         (:meth:`leaps_mj.environment.mapping.EgoMapper.context`).
       cues: Whether the maps mark the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
+      teacher: Whose path the goal labels follow: ``geodesic``
+        (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
+        (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
+        room has been seen).
       commit_turns: Whether the collecting drivers finish a turn before choosing the next goal
         (:class:`leaps_mj.environment.map_navigation.GoalDriver`); the shipped network was collected
         without (False), the sub-policy acts with it.
@@ -104,6 +111,7 @@ class GoalTrainConfig:
     label_sigma: float = 0.0
     context: bool = False
     cues: bool = False
+    teacher: str = "geodesic"
     commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
@@ -125,6 +133,8 @@ class GoalTrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")
+        if self.teacher not in TEACHERS:
+            raise ValueError(f"teacher {self.teacher!r}: expected one of {sorted(TEACHERS)}")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
@@ -171,7 +181,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
                        horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
                        max_start_distance=config.max_start_distance)
-    teacher = goal_teacher.TeacherGoals(env, seed)
+    teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, nodes, labels, success, driven = [], [], [], [], []
     try:

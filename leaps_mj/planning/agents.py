@@ -210,9 +210,10 @@ class MapOracleAgent:
     """
 
     name = "oracle-map"
+    teacher_class = goal_teacher.TeacherGoals
 
     def __init__(self, env, seed: int = 0, width: int = 40, height: int = 30):
-        self.teacher = goal_teacher.TeacherGoals(env, seed)
+        self.teacher = self.teacher_class(env, seed)
         self.width, self.height = width, height
         self.seed = seed
         self.driver: map_navigation.GoalDriver | None = None
@@ -225,12 +226,21 @@ class MapOracleAgent:
 
     def step(self, timestep) -> int:
         self.driver.observe(timestep.observation)
+        goal = self.teacher.cell(self.driver.mapper, self.driver.pose)  # every step: a teacher's memory updates
         if self.driver.needs_goal():
-            self.driver.set_goal(self.teacher.cell(self.driver.mapper, self.driver.pose))
+            self.driver.set_goal(goal)
         return self.driver.act()
 
     def info(self) -> dict:
         return {"subtarget": self.target, "plan": [], "belief": None}
+
+
+class ObservableMapOracleAgent(MapOracleAgent):
+    """The map-goal walk with the observable teacher's goals
+    (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`): the ceiling of a network trained on them."""
+
+    name = "oracle-map-observable"
+    teacher_class = goal_teacher.ObservableTeacherGoals
 
 
 @dataclasses.dataclass(frozen=True)
