@@ -173,3 +173,22 @@ def test_cues_mark_the_outdoor_fences_and_trees_as_its_target():
     # Other nodes have no cues: the flag changes nothing for them.
     kitchen = [mapping.EgoMapper("kitchen", W, H, cues=c).update(seg, depth, (0.0, 0.0, 0.0)) for c in (0, 1)]
     np.testing.assert_array_equal(*kitchen)
+
+
+def test_semantic_channels_mark_each_room_types_objects_whatever_the_target():
+    seg, depth = wall_frame(2.0)
+    seg[:, : W // 2] = rooms.seg_class_index("table")  # the dining room's, the living room's and the office's
+    seg[:, W // 2:] = rooms.seg_class_index("sofa")  # the living room's only
+    plain = mapping.EgoMapper("bedroom", W, H).update(seg, depth, (0.0, 0.0, 0.0))
+    semantic = mapping.EgoMapper("bedroom", W, H, semantic=True).update(seg, depth, (0.0, 0.0, 0.0))
+    assert plain.shape[0] == mapping.num_channels(False) == len(mapping.CHANNELS)
+    assert semantic.shape[0] == mapping.num_channels(True) == len(mapping.CHANNELS) + len(mapping.SEMANTIC)
+    np.testing.assert_array_equal(semantic[:len(mapping.CHANNELS)], plain)  # the first channels are unchanged
+    marked = {node: semantic[len(mapping.CHANNELS) + k] for k, node in enumerate(mapping.SEMANTIC)}
+    # The sofa (right half of the frame) lands right of the agent, the table left: columns beyond / before the middle.
+    left, right = (slice(None), slice(None, mapping.WINDOW // 2)), (slice(None), slice(mapping.WINDOW // 2, None))
+    assert marked["living_room"][left].any() and marked["living_room"][right].any()
+    for node in ("dining_room", "office"):
+        assert marked[node][left].any() and not marked[node][right].any()
+    for node in ("kitchen", "bathroom", "bedroom", "garage"):
+        assert not marked[node].any()

@@ -166,15 +166,16 @@ class GoalDriver:
       context: :meth:`observe` also returns the coarse 16 m window
         (:meth:`leaps_mj.environment.mapping.EgoMapper.context`) below the fine one.
       cues: The map marks the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
+      semantic: The map marks every room type's see-objects (:data:`leaps_mj.environment.mapping.SEMANTIC`).
     """
 
     def __init__(self, target: str, width: int, height: int, seed: int = 0, commit_turns: bool = True,
-                 context: bool = False, cues: bool = False):
+                 context: bool = False, cues: bool = False, semantic: bool = False):
         self.target = target
         self.commit_turns = commit_turns
         self.context = context
         self.node = rooms.GRAPH_NODES.index(target)
-        self.mapper = mapping.EgoMapper(target, width, height, cues)
+        self.mapper = mapping.EgoMapper(target, width, height, cues, semantic)
         self.navigator = MapNavigator(self.mapper, seed)
         see = [rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS.get(target, ())]
         self._see = np.zeros(rooms.NUM_SEG_CLASSES, bool)

@@ -22,6 +22,11 @@ Channels of the map (uint8, 1 where the cell holds it):
 4. ``furniture``: any other furniture;
 5. ``visited``: cells the agent stood in.
 
+With ``semantic``, one more channel per room type that has see-objects (:data:`SEMANTIC`): its
+see-objects, whatever the target. Several types share classes (a table is the dining room's, the living
+room's and the office's), so a mapped table alone does not say which room it stands in; what else
+stands around it (a sofa, a computer) does, and these channels show it.
+
 :meth:`EgoMapper.context` reads the same channels out over a window twice as wide at half
 the resolution (:data:`CONTEXT_CELL`), for what was mapped beyond the 4 m around the agent.
 
@@ -51,6 +56,8 @@ CONTEXT_CELL = 2 * CELL
 #: Classes that mark a node on the map where it has no see-objects (with ``cues``): an outdoor
 #: area is fenced and has the trees.
 CUES = {"outdoor": ("fence", "tree")}
+#: Room types marked in a channel of their own by a ``semantic`` map, in channel order after CHANNELS.
+SEMANTIC = tuple(node for node in rooms.GRAPH_NODES if rooms.SEE_OBJECTS.get(node))
 #: Vertical field of view of the agent's camera (degrees; ``assets/agent.xml``).
 CAMERA_FOVY = 60.0
 #: Points farther than this (metres along the view axis) are not mapped: at 40x30 they are too coarse.
@@ -77,6 +84,19 @@ def _class_channels(target: str, cues: bool) -> np.ndarray:
     return table
 
 
+def num_channels(semantic: bool) -> int:
+    """Channels of a map: :data:`CHANNELS`, and with ``semantic`` one per room type of :data:`SEMANTIC`."""
+    return len(CHANNELS) + (len(SEMANTIC) if semantic else 0)
+
+
+def _semantic_marks() -> np.ndarray:
+    """(classes, len(SEMANTIC)) bool: which room types' see-objects each segmentation class is."""
+    marks = np.zeros((rooms.NUM_SEG_CLASSES, len(SEMANTIC)), bool)
+    for k, node in enumerate(SEMANTIC):
+        marks[[rooms.seg_class_index(c) for c in rooms.SEE_OBJECTS[node]], k] = True
+    return marks
+
+
 class EgoMapper:
     """Accumulates frames into a top-down map and reads it out around the agent.
 
@@ -85,12 +105,13 @@ class EgoMapper:
         ``target`` channel).
       width, height: Resolution of the frames it is given.
       cues: Also mark the target's :data:`CUES` in the ``target`` channel.
+      semantic: Also mark each room type's see-objects in a channel of its own (:data:`SEMANTIC`).
 
     Raises:
       ValueError: for an unknown target or a non-positive resolution.
     """
 
-    def __init__(self, target: str, width: int, height: int, cues: bool = False):
+    def __init__(self, target: str, width: int, height: int, cues: bool = False, semantic: bool = False):
         if width < 1 or height < 1:
             raise ValueError(f"frame size {width}x{height}: expected positive width and height")
         self.target = target
@@ -107,7 +128,8 @@ class EgoMapper:
         coarse = (WINDOW / 2 - np.arange(WINDOW) - 0.5) * CONTEXT_CELL
         self._context = [np.meshgrid(coarse + da, coarse + dl, indexing="ij")
                          for da in (-CELL / 2, CELL / 2) for dl in (-CELL / 2, CELL / 2)]
-        self._grid = np.zeros((len(CHANNELS), GRID, GRID), np.uint8)
+        self._marks = _semantic_marks() if semantic else None
+        self._grid = np.zeros((num_channels(semantic), GRID, GRID), np.uint8)
         self.blocked = np.zeros((GRID, GRID), bool)
         self._origin: np.ndarray | None = None
 
@@ -119,7 +141,7 @@ class EgoMapper:
 
     @property
     def grid(self) -> np.ndarray:
-        """The allocentric map (len(CHANNELS), GRID, GRID): row ``r``, column ``c`` is the cell
+        """The allocentric map (channels, GRID, GRID): row ``r``, column ``c`` is the cell
         ``(c - GRID/2) * CELL`` east and ``(r - GRID/2) * CELL`` north of the first pose."""
         return self._grid
 
@@ -151,11 +173,11 @@ class EgoMapper:
 
     def context(self, pose) -> np.ndarray:
         """The map around ``pose`` over a window of WINDOW cells of :data:`CONTEXT_CELL` (16 m across),
-        oriented as :meth:`update`'s: (len(CHANNELS), WINDOW, WINDOW) uint8, a coarse cell 1 where
+        oriented as :meth:`update`'s: (channels, WINDOW, WINDOW) uint8, a coarse cell 1 where
         any of the fine cells it covers is."""
         px, py, yaw = (float(v) for v in pose)
         cos, sin = math.cos(yaw), math.sin(yaw)
-        window = np.zeros((len(CHANNELS), WINDOW, WINDOW), np.uint8)
+        window = np.zeros((len(self._grid), WINDOW, WINDOW), np.uint8)
         for ahead, left in self._context:
             row, col, inside = self.cells(px + ahead * cos - left * sin, py + ahead * sin + left * cos)
             window[:, inside] |= self._grid[:, row[inside], col[inside]]
@@ -187,7 +209,7 @@ class EgoMapper:
           pose: (x, y, yaw radians) of the agent, as the ``pose`` observation.
 
         Returns:
-          (len(CHANNELS), WINDOW, WINDOW) uint8: row 0 is ahead of the agent,
+          (channels, WINDOW, WINDOW) uint8 (:func:`num_channels`): row 0 is ahead of the agent,
           column 0 to its left; the agent stands between the four centre cells.
 
         Raises:
@@ -209,6 +231,10 @@ class EgoMapper:
         d, right, channel = depth[keep], self._right[keep] * depth[keep], channel[keep]
         row, col, inside = self.cells(px + d * cos + right * sin, py + d * sin - right * cos)
         self._grid[channel[inside], row[inside], col[inside]] = 1
+        if self._marks is not None:
+            marks = self._marks[seg[keep][inside]]
+            for k in range(marks.shape[1]):
+                self._grid[len(CHANNELS) + k, row[inside][marks[:, k]], col[inside][marks[:, k]]] = 1
         solid = inside & (channel != CHANNELS.index("floor")) & (channel != CHANNELS.index("door")) \
             & (z[keep] >= low) & (z[keep] <= high)
         self.blocked[row[solid], col[solid]] = True
@@ -216,6 +242,6 @@ class EgoMapper:
         if here_inside:
             self._grid[CHANNELS.index("visited"), here_row, here_col] = 1
         row, col, inside = self.cells(*self.window_world(pose))
-        window = np.zeros((len(CHANNELS), WINDOW, WINDOW), np.uint8)
+        window = np.zeros((len(self._grid), WINDOW, WINDOW), np.uint8)
         window[:, inside] = self._grid[:, row[inside], col[inside]]
         return window

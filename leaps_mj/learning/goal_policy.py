@@ -100,7 +100,8 @@ class GoalSubPolicy:
         if target not in self._drivers:
             config = self.net.config
             self._drivers[target] = map_navigation.GoalDriver(target, self.width, self.height,
-                                                              context=config.context, cues=config.cues)
+                                                              context=config.context, cues=config.cues,
+                                                              semantic=config.semantic)
         self._driver = self._drivers[target]
         self._driver.reset(self._seed)
 

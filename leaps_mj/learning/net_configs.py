@@ -9,6 +9,7 @@ import dataclasses
 import math
 from typing import Any
 
+from leaps_mj.environment import mapping
 from leaps_mj.world import rooms
 
 
@@ -171,6 +172,8 @@ class GoalNetConfig:
         (``EgoMapper.context``; its channels follow the fine window's).
       cues: Whether its maps mark the target's cues (``mapping.CUES``: fences
         and trees for ``outdoor``).
+      semantic: Whether its maps mark every room type's see-objects in channels
+        of their own (``mapping.SEMANTIC``, after the ``map_channels``).
     """
 
     width: int = 40
@@ -182,18 +185,21 @@ class GoalNetConfig:
     num_nodes: int = len(rooms.GRAPH_NODES)
     context: bool = False
     cues: bool = False
+    semantic: bool = False
 
     @property
     def input_channels(self) -> int:
-        """Channels of the maps it reads: the fine window's, and with ``context`` the coarse window's."""
-        return self.map_channels * (2 if self.context else 1)
+        """Channels of the maps it reads: the fine window's (with ``semantic`` one more per room type of
+        ``mapping.SEMANTIC``), and with ``context`` the coarse window's."""
+        fine = self.map_channels + (len(mapping.SEMANTIC) if self.semantic else 0)
+        return fine * (2 if self.context else 1)
 
     def __post_init__(self):
         object.__setattr__(self, "channels", tuple(self.channels))
         _check_positive_tuple("channels", self.channels)
         for name in ("width", "height", "hidden", "map_channels", "window", "num_nodes"):
             _check_positive(name, getattr(self, name))
-        for name in ("context", "cues"):
+        for name in ("context", "cues", "semantic"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.window % 2 ** len(self.channels):

@@ -81,6 +81,8 @@ class GoalTrainConfig:
       context: Whether the network also reads the coarse 16 m window around the agent
         (:meth:`leaps_mj.environment.mapping.EgoMapper.context`).
       cues: Whether the maps mark the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
+      semantic: Whether the maps mark every room type's see-objects in channels of their own
+        (:data:`leaps_mj.environment.mapping.SEMANTIC`).
       teacher: Whose path the goal labels follow: ``geodesic``
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
@@ -111,6 +113,7 @@ class GoalTrainConfig:
     label_sigma: float = 0.0
     context: bool = False
     cues: bool = False
+    semantic: bool = False
     teacher: str = "geodesic"
     commit_turns: bool = False
     horizon: int = 60
@@ -121,7 +124,8 @@ class GoalTrainConfig:
     @property
     def net_config(self) -> nets.GoalNetConfig:
         """The architecture of the network this run trains."""
-        return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues)
+        return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues,
+                                 semantic=self.semantic)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
@@ -190,7 +194,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             target = env.task.episode.target
             driver = drivers.setdefault(target, map_navigation.GoalDriver(
                 target, config.width, config.height, commit_turns=config.commit_turns, context=config.context,
-                cues=config.cues))
+                cues=config.cues, semantic=config.semantic))
             driver.reset(int(rng.integers(2 ** 31)))
             by_teacher = net is None or rng.random() < beta
             while not ts.last():
