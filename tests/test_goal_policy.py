@@ -279,20 +279,24 @@ def test_a_committed_driver_looking_around_at_its_goal_chooses_again():
     assert driver.needs_goal()
 
 
-def test_a_network_reading_the_context_window_trains_and_drives_with_it(tiny_dataset, tmp_path, env):
+def test_a_network_reading_the_context_window_and_semantic_channels_trains_and_drives_with_them(
+        tiny_dataset, tmp_path, env):
     config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=1, episodes=2,
-                                 context=True, cues=True)
+                                 context=True, cues=True, semantic=True)
     train_goal.GoalTrainer(config, tmp_path, progress=False).train()
     data = np.load(tmp_path / "data" / "round_000.npz")
-    assert data["maps"].shape[1] * 8 >= 2 * len(mapping.CHANNELS) * mapping.WINDOW ** 2
+    channels = mapping.num_channels(True)
+    assert config.net_config.input_channels == 2 * channels
+    assert data["maps"].shape[1] == 2 * channels * mapping.WINDOW ** 2 // 8
     policy = goal_policy.GoalSubPolicy(tmp_path)
-    assert policy.net.config.context and policy.net.config.cues
+    assert policy.net.config.context and policy.net.config.cues and policy.net.config.semantic
     ts = env.reset()
     policy.reset("outdoor")
     assert 0 <= policy.act(ts) < rooms.NUM_ACTIONS
     driver = policy._drivers["outdoor"]
     assert driver.context and driver.mapper._channel_of[rooms.seg_class_index("fence")] == mapping.CHANNELS.index(
         "target")
+    assert driver.mapper.grid.shape[0] == channels
     with pytest.raises(ValueError, match="context must be a bool"):
         nets.GoalNetConfig(context=1)
 
@@ -308,3 +312,30 @@ def test_max_updates_caps_the_learners_minibatches_per_round(tiny_dataset, tmp_p
     assert steps[1] == 2 < steps[0]
     with pytest.raises(ValueError, match="max_updates"):
         dataclasses.replace(config, max_updates=-1)
+
+
+def test_reinforce_raises_the_goals_of_episodes_that_succeeded(tiny_dataset, tmp_path, monkeypatch):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), method="reinforce",
+                                 bc_coef=0.0, rounds=1, batch=8, lr=1e-2)
+    trainer = train_goal.GoalTrainer(config, tmp_path, progress=False)
+    rng = np.random.default_rng(0)
+    window = (rng.random((len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)) < 0.2).astype(np.uint8)
+    good, bad = 3 * mapping.WINDOW + 5, 20 * mapping.WINDOW + 9
+    # Two episodes of one node on the same map: the first chose `good` and succeeded, the second `bad` and failed.
+    fresh = {"maps": np.stack([np.packbits(window)] * 4), "node": np.full(4, 2), "label": np.array([good, good, bad, bad]),
+             "choice": np.array([good, -1, bad, -1]), "episode": np.array([0, 0, 1, 1]),
+             "success": np.array([True, False]), "teacher": np.array([False, False])}
+    monkeypatch.setattr(trainer, "_collect", lambda: fresh)
+
+    def gap():
+        with torch.no_grad():
+            logits = trainer.model(torch.as_tensor(window[None]), torch.tensor([2]))[0]
+        return float(logits[good] - logits[bad])
+
+    before = gap()
+    row = trainer.iterate()
+    assert gap() > before and row["learner_success"] == 0.5
+    with pytest.raises(ValueError, match="method 'ppo'"):
+        dataclasses.replace(config, method="ppo")
+    with pytest.raises(ValueError, match="init_from"):
+        trainer.warm_start(goal_policy.DEFAULT_DIR)  # the shipped network reads 40x30 maps, this run 24x18

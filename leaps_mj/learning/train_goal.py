@@ -17,6 +17,12 @@ over the map's cells). This is the issue's "aggregated on-disk DAgger
 dataset trained for several epochs per round": the workers' frames cost
 nothing to the learner, and a sample is reused ``epochs`` times per round.
 
+``--method reinforce --init-from DIR`` fine-tunes a trained network instead: every round's
+episodes are driven by goals sampled from it, and it takes a policy-gradient step towards the
+goals of the episodes that succeeded (REINFORCE with a per-node mean baseline), kept near the
+teacher by a cross-entropy term; this optimises the hop success itself rather than agreement
+with a teacher the network cannot always read.
+
 Written under ``--out``: ``goal.pt`` (the network, after each round),
 ``state.pt`` (network, optimiser, round: what resuming reads),
 ``progress.csv`` (per round: samples, the driving policy's success, loss and
@@ -87,6 +93,15 @@ class GoalTrainConfig:
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
         room has been seen).
+      method: ``dagger`` (the rounds above) or ``reinforce``: each round the network's goals, sampled
+        at ``temperature``, drive every episode, and the network takes a policy-gradient step on
+        its goal choices (advantage: the episode's success minus the round's mean success for its
+        node) plus ``bc_coef`` times the cross-entropy to the teacher's goals on the round's states;
+        no dataset is aggregated. For fine-tuning a DAgger network (``init_from``).
+      init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
+      temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
+        argmax the sub-policy acts with).
+      bc_coef: Weight of the cross-entropy to the teacher's goals in ``reinforce``.
       commit_turns: Whether the collecting drivers finish a turn before choosing the next goal
         (:class:`leaps_mj.environment.map_navigation.GoalDriver`); the shipped network was collected
         without (False), the sub-policy acts with it.
@@ -115,6 +130,10 @@ class GoalTrainConfig:
     cues: bool = False
     semantic: bool = False
     teacher: str = "geodesic"
+    method: str = "dagger"
+    init_from: str = ""
+    temperature: float = 0.5
+    bc_coef: float = 0.5
     commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
@@ -139,11 +158,15 @@ class GoalTrainConfig:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")
         if self.teacher not in TEACHERS:
             raise ValueError(f"teacher {self.teacher!r}: expected one of {sorted(TEACHERS)}")
+        if self.method not in ("dagger", "reinforce"):
+            raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
             raise ValueError(f"label_sigma {self.label_sigma!r}: expected a number >= 0")
-        for name in ("lr", "max_start_distance"):
+        if not self.bc_coef >= 0:
+            raise ValueError(f"bc_coef {self.bc_coef!r}: expected a number >= 0")
+        for name in ("lr", "max_start_distance", "temperature"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
 
@@ -159,7 +182,7 @@ PRESETS = {
 
 
 def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, beta: float,
-            state_dict: dict | None) -> dict[str, np.ndarray]:
+            state_dict: dict | None, temperature: float | None = None) -> dict[str, np.ndarray]:
     """Runs ``episodes`` training episodes in one process and returns their labelled samples.
 
     Args:
@@ -169,11 +192,14 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
       episodes: Episodes to run.
       beta: Probability that the teacher's goals drive an episode (the network's otherwise).
       state_dict: The network's weights (None: the teacher drives every episode).
+      temperature: The network's goals are sampled from its softmax at this temperature (None: its argmax).
 
     Returns:
       ``maps`` (N, packed bytes) uint8 bit-packed egocentric maps, ``node``
-      (N,) and ``label`` (N,) ints, ``success`` (E,) and ``teacher`` (E,)
-      bools: whether each episode succeeded and whether the teacher drove it.
+      (N,) and ``label`` (N,) ints, ``choice`` (N,) the goal chosen at each
+      step (-1 where none was), ``episode`` (N,) each step's episode index;
+      ``success`` (E,) and ``teacher`` (E,) bools: whether each episode
+      succeeded and whether the teacher drove it.
     """
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)
@@ -187,9 +213,9 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                        max_start_distance=config.max_start_distance)
     teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
-    maps, nodes, labels, success, driven = [], [], [], [], []
+    maps, nodes, labels, choices, episode_of, success, driven = [], [], [], [], [], [], []
     try:
-        for _ in range(episodes):
+        for episode in range(episodes):
             ts = env.reset()
             target = env.task.episode.target
             driver = drivers.setdefault(target, map_navigation.GoalDriver(
@@ -203,20 +229,29 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                 maps.append(np.packbits(window))
                 nodes.append(driver.node)
                 labels.append(label)
+                episode_of.append(episode)
+                choice = -1
                 if driver.needs_goal():
                     if by_teacher:
-                        driver.set_goal(label)
+                        choice = label
                     else:
                         with torch.no_grad():
-                            logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]))
-                        driver.set_goal(int(logits.argmax()))
+                            logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]))[0]
+                        if temperature is None:
+                            choice = int(logits.argmax())
+                        else:
+                            p = torch.softmax(logits.double() / temperature, 0).numpy()
+                            choice = int(rng.choice(len(p), p=p / p.sum()))
+                    driver.set_goal(choice)
+                choices.append(choice)
                 ts = env.step(driver.act())
             success.append(bool(env.task.success))
             driven.append(by_teacher)
     finally:
         env.close()
     return {"maps": np.asarray(maps, np.uint8), "node": np.asarray(nodes, np.int64),
-            "label": np.asarray(labels, np.int64), "success": np.asarray(success, bool),
+            "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
+            "episode": np.asarray(episode_of, np.int64), "success": np.asarray(success, bool),
             "teacher": np.asarray(driven, bool)}
 
 
@@ -266,7 +301,7 @@ class GoalTrainer(trainer_lib.Trainer):
     """DAgger in rounds for the map-goal network (one iteration = one round)."""
 
     unit = "round"
-    loss_keys = frozenset({"loss", "accuracy"})
+    loss_keys = frozenset({"loss", "pg_loss", "accuracy"})
     growable = frozenset({"rounds"})  # nothing is scheduled over the rounds: a finished run can go on
 
     def __init__(self, config: GoalTrainConfig, out: str | os.PathLike, progress: bool = True):
@@ -286,13 +321,32 @@ class GoalTrainer(trainer_lib.Trainer):
     def _collect(self) -> dict[str, np.ndarray]:
         c = self.config
         shards = training_env.training_houses(c.dataset, None, c.num_houses, c.workers, self.out, name="goal")
-        weights = None if self.iteration == 0 else {k: v.clone() for k, v in self.model.state_dict().items()}
-        beta = 1.0 if self.iteration == 0 else c.beta
+        reinforce = c.method == "reinforce"
+        weights = None if self.iteration == 0 and not reinforce else {
+            k: v.clone() for k, v in self.model.state_dict().items()}
+        beta = 0.0 if reinforce else 1.0 if self.iteration == 0 else c.beta
+        temperature = c.temperature if reinforce else None
         counts = [c.episodes // c.workers + (w < c.episodes % c.workers) for w in range(c.workers)]
-        futures = [self._pool.submit(collect, c, str(shard), c.seed + 1000 * self.iteration + w, n, beta, weights)
+        futures = [self._pool.submit(collect, c, str(shard), c.seed + 1000 * self.iteration + w, n, beta, weights,
+                                     temperature)
                    for w, (shard, n) in enumerate(zip(shards, counts)) if n]
         parts = [f.result() for f in futures]
+        first = np.cumsum([0] + [len(p["success"]) for p in parts[:-1]])
+        for part, offset in zip(parts, first):
+            part["episode"] = part["episode"] + offset  # episode indices over all workers
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def warm_start(self, path: str | os.PathLike) -> None:
+        """Starts a new run from the weights of a ``goal.pt`` (or a folder holding one).
+
+        Raises:
+          ValueError: naming the file, if it holds another network than this run's.
+        """
+        path = pathlib.Path(path)
+        model, _ = goal_policy.load_goal_net(path / goal_policy.GOAL if path.is_dir() else path)
+        if model.config != self.model.config:
+            raise ValueError(f"init_from {path}: holds a network {model.config}, expected this run's {self.model.config}")
+        self.model.load_state_dict(model.state_dict())
 
     def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Every round's samples so far, this round's (``fresh``) last: earlier rounds are read from
@@ -305,6 +359,50 @@ class GoalTrainer(trainer_lib.Trainer):
         return self._data
 
     def iterate(self) -> dict:
+        return self._reinforce() if self.config.method == "reinforce" else self._dagger()
+
+    def _reinforce(self) -> dict:
+        """One round of policy-gradient fine-tuning on the goals the network sampled (see ``method``)."""
+        c = self.config
+        t0 = time.perf_counter()
+        fresh = self._collect()
+        collect_seconds = time.perf_counter() - t0
+        won = fresh["success"].astype(np.float64)
+        node_of = np.zeros(len(won), np.int64)
+        node_of[fresh["episode"]] = fresh["node"]
+        baseline = np.array([won[node_of == n].mean() if (node_of == n).any() else 0.0
+                             for n in range(len(rooms.GRAPH_NODES))])
+        advantage = torch.as_tensor((won - baseline[node_of])[fresh["episode"]], dtype=torch.float32)
+        rng = np.random.default_rng(c.seed + self.iteration)
+        self.model.train()
+        pg_losses, bc_losses = [], []
+        order = rng.permutation(len(fresh["label"]))
+        for start in range(0, len(order), c.batch):
+            idx = np.sort(order[start:start + c.batch])
+            logits = self.model(_unpack(fresh["maps"][idx], self.model.config.input_channels),
+                                torch.as_tensor(fresh["node"][idx]))
+            bc = goal_loss(logits, torch.as_tensor(fresh["label"][idx]), c.label_sigma)
+            choice = torch.as_tensor(fresh["choice"][idx])
+            chose = choice >= 0
+            pg = torch.zeros(())
+            if chose.any():
+                logp = F.log_softmax(logits[chose] / c.temperature, dim=1)
+                pg = -(advantage[idx][chose] * logp.gather(1, choice[chose, None])[:, 0]).mean()
+            loss = pg + c.bc_coef * bc
+            self.optimizer.zero_grad()
+            loss.backward()
+            self.optimizer.step()
+            pg_losses.append(pg.item())
+            bc_losses.append(bc.item())
+        self.model.eval()
+        return {"samples": len(fresh["label"]), "fresh_samples": len(fresh["label"]),
+                "teacher_success": float("nan"), "learner_success": float(won.mean()),
+                "loss": float(np.mean(bc_losses)), "pg_loss": float(np.mean(pg_losses)),
+                "accuracy": float("nan"), "collect_seconds": collect_seconds,
+                "train_seconds": time.perf_counter() - t0 - collect_seconds}
+
+    def _dagger(self) -> dict:
+        """One DAgger round: collect, add to the dataset on disk, train ``epochs`` passes over all of it."""
         c = self.config
         t0 = time.perf_counter()
         fresh = self._collect()
@@ -402,7 +500,8 @@ def main(argv=None) -> int:
         raise ValueError(f"--stop-after {args.stop_after}: expected a positive integer")
     torch.set_num_threads(args.threads)
     trainer = GoalTrainer(config, args.out, progress=not args.no_progress)
-    trainer.resume(config.width, config.height)
+    if not trainer.resume(config.width, config.height) and config.init_from:
+        trainer.warm_start(config.init_from)
     trainer.train(args.stop_after)
     if trainer.finished:
         print(f"wrote {trainer.out / goal_policy.GOAL} and {plot_curves(trainer.out / 'progress.csv', trainer.out / 'training_curves.png')}")
