@@ -40,10 +40,13 @@ class TeacherGoals:
       seed: Seed of the expert (its random moves are not used).
     """
 
+    #: The expert whose steering fields the goals follow.
+    expert_class = expert_lib.GeodesicExpert
+
     def __init__(self, env, seed: int = 0):
         self.env = env
-        self.expert = expert_lib.GeodesicExpert(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
-        self._fields: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+        self.expert = self.expert_class(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
+        self._fields: dict[tuple[str, str, tuple[int, ...]], tuple[np.ndarray, np.ndarray]] = {}
 
     def _field(self, target: str, subset: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
         """Steering field to the (shrunk) zone of ``target``, whose rooms the expert's ``field`` chooses
@@ -101,10 +104,7 @@ class ObservableTeacherGoals(TeacherGoals):
       seed: Seed of the expert (its random moves are not used).
     """
 
-    def __init__(self, env, seed: int = 0):
-        self.env = env
-        self.expert = observable_expert.ObservableExpert(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
-        self._fields = {}
+    expert_class = observable_expert.ObservableExpert
 
     def steering(self) -> tuple[np.ndarray, np.ndarray]:
         self.expert.observe()

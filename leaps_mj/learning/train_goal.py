@@ -175,9 +175,10 @@ PRESETS = {
     # Seconds: for tests.
     "tiny": GoalTrainConfig(num_houses=4, width=24, height=18, workers=1, rounds=2, episodes=2, epochs=1,
                             batch=16, horizon=12),
-    # The shipped network (session 8, arm B of docs/training.md): 12 rounds of 240 hop-like episodes on the
-    # 2 cores (about 125 k samples, 35 minutes), mirrored maps, goal labels spread over σ = 1 cell.
-    "cpu": GoalTrainConfig(rounds=12, mirror=True, label_sigma=1.0),
+    # The shipped network (session 10, arm SC of docs/training.md): 12 rounds of 240 hop-like episodes on the
+    # 2 cores (about 125 k samples, 35 minutes), mirrored maps, goal labels spread over σ = 1 cell, the coarse
+    # 16 m context window and one channel per room type's see-objects. Session 8's B: --context false --semantic false.
+    "cpu": GoalTrainConfig(rounds=12, mirror=True, label_sigma=1.0, context=True, semantic=True),
 }
 
 
