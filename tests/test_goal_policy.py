@@ -322,7 +322,8 @@ def test_reinforce_raises_the_goals_of_episodes_that_succeeded(tiny_dataset, tmp
     window = (rng.random((len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)) < 0.2).astype(np.uint8)
     good, bad = 3 * mapping.WINDOW + 5, 20 * mapping.WINDOW + 9
     # Two episodes of one node on the same map: the first chose `good` and succeeded, the second `bad` and failed.
-    fresh = {"maps": np.stack([np.packbits(window)] * 4), "node": np.full(4, 2), "label": np.array([good, good, bad, bad]),
+    fresh = {"maps": np.stack([np.packbits(window)] * 4), "node": np.full(4, 2),
+             "label": np.array([good, good, bad, bad]),
              "choice": np.array([good, -1, bad, -1]), "episode": np.array([0, 0, 1, 1]),
              "success": np.array([True, False]), "teacher": np.array([False, False])}
     monkeypatch.setattr(trainer, "_collect", lambda: fresh)

@@ -218,7 +218,8 @@ class GoalDriver:
         with ``commit_turns``, not in the middle of a turn)."""
         if self.goal is None:
             return True
-        return self._since_goal >= REPLAN and not (self.commit_turns and self._last_action in TURNS and not self._arrived)
+        mid_turn = self._last_action in TURNS and not self._arrived
+        return self._since_goal >= REPLAN and not (self.commit_turns and mid_turn)
 
     def set_goal(self, cell: int) -> None:
         """Heads for a cell of the egocentric map (row-major index into the window) around the current pose."""

@@ -109,9 +109,10 @@ class ObservableExpert(expert.GeodesicExpert):
         if task.sees():
             return expert.STAY
         if not self.target_revealed():
-            walk = self.walk(self.env.physics.agent_pose())
+            pose = self.env.physics.agent_pose()
+            walk = self.walk(pose)
             if walk is not None:
-                return self.follow(*walk, self.env.physics.agent_pose())
+                return self.follow(*walk, pose)
         return super().act()
 
     def target_revealed(self) -> bool:

@@ -346,7 +346,8 @@ class GoalTrainer(trainer_lib.Trainer):
         path = pathlib.Path(path)
         model, _ = goal_policy.load_goal_net(path / goal_policy.GOAL if path.is_dir() else path)
         if model.config != self.model.config:
-            raise ValueError(f"init_from {path}: holds a network {model.config}, expected this run's {self.model.config}")
+            raise ValueError(f"init_from {path}: holds a network {model.config}, "
+                             f"expected this run's {self.model.config}")
         self.model.load_state_dict(model.state_dict())
 
     def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
