@@ -66,10 +66,11 @@ def test_killed_prior_run_resumes_to_the_same_counts(tiny_dataset, tmp_path):
 
 
 def test_choose_prefers_the_best_then_the_paper_values():
-    paper = tune_obs_noise.PAPER
-    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, paper: 0.4}) == (0.01, 0.3)
-    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, paper: 0.5}) == paper
-    assert tune_obs_noise.choose({(0.01, 0.3): 0.5, (0.05, 0.3): 0.5}) == (0.01, 0.3)
+    paper = (*tune_obs_noise.PAPER, 30)
+    assert tune_obs_noise.choose({(0.01, 0.3, 30): 0.5, paper: 0.4}) == (0.01, 0.3, 30)
+    assert tune_obs_noise.choose({(0.01, 0.3, 30): 0.5, paper: 0.5}) == paper
+    assert tune_obs_noise.choose({(0.01, 0.3, 45): 0.5, (0.05, 0.3, 30): 0.5}) == (0.01, 0.3, 45)
+    assert tune_obs_noise.choose({(*tune_obs_noise.PAPER, 45): 0.5, paper: 0.5}) == paper
 
 
 def test_obs_noise_tiny_preset_writes_the_chosen_noise(tiny_dataset, tmp_path, capsys):
@@ -79,11 +80,31 @@ def test_obs_noise_tiny_preset_writes_the_chosen_noise(tiny_dataset, tmp_path, c
     argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(out)]
     assert tune_obs_noise.main(argv) == 0
     model = semantic.SemanticModel.from_json(out / "prior.json")
-    assert (model.psi_obs0, model.psi_obs1) in tune_obs_noise.PRESETS["tiny"].grid()
+    assert (model.psi_obs0, model.psi_obs1, 30) in tune_obs_noise.PRESETS["tiny"].grid()
     np.testing.assert_allclose(model.prior, semantic.SemanticModel.from_reference().prior)
     table = (out / "obs_noise.md").read_text()
     assert table.count("\n| 0.") == 2 and table.count("**chosen**") == 1
     assert "chosen psi_obs0" in capsys.readouterr().out
+    chosen = json.loads((out / "obs_noise.json").read_text())
+    assert (chosen["psi_obs0"], chosen["psi_obs1"]) == (model.psi_obs0, model.psi_obs1)
+    assert chosen["replan_every"] == 30 and chosen["rule"] == "paper"
+
+
+def test_obs_noise_searches_n_and_the_release_rule(tiny_dataset, tmp_path):
+    out = tmp_path / "tune"
+    out.mkdir()
+    semantic.SemanticModel.from_reference().to_json(out / "prior.json")
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(out), "--psi-obs0", "0.001",
+            "--replan-every", "10,20", "--rule", "release"]
+    assert tune_obs_noise.main(argv) == 0
+    table = (out / "obs_noise.md").read_text()
+    assert "release rule" in table
+    assert [line.split(" | ")[2] for line in table.splitlines()[2:]] == ["10", "20"]
+    assert json.loads((out / "obs_noise.json").read_text())["replan_every"] in (10, 20)
+    digest = next((out / "obs_noise").iterdir())
+    assert sorted(d.name for d in digest.iterdir()) == ["N10", "N20"]
+    rows = (digest / "N20" / "episodes_leaps-release-psi0.001-0.15.csv").read_text()
+    assert rows.count("\n") > 1
 
 
 def test_obs_noise_grid_options_override_the_preset(tiny_dataset, tmp_path):
@@ -100,7 +121,10 @@ def test_obs_noise_grid_options_override_the_preset(tiny_dataset, tmp_path):
 
 @pytest.mark.parametrize("bad, match", [(["--psi-obs1", "0.5,x"], "expected comma-separated numbers"),
                                         (["--psi-obs1", "1.5"], r"psi_obs1 grid \(1.5,\): expected probabilities"),
-                                        (["--episodes-per-length", "0"], "episodes_per_length 0: expected")])
+                                        (["--episodes-per-length", "0"], "episodes_per_length 0: expected"),
+                                        (["--replan-every", "30,0"], r"replan_every grid \(30, 0\): expected"),
+                                        (["--replan-every", "3.5"], "expected comma-separated integers"),
+                                        (["--policy-dir", "x"], "--policy-dir 'x' needs --subpolicy learned")])
 def test_obs_noise_bad_grid_options_are_refused_naming_the_value(bad, match, capsys):
     with pytest.raises(SystemExit):
         tune_obs_noise.main(["--preset", "tiny", *bad])
