@@ -105,6 +105,7 @@ AGENTS = {
     "oracle-map": AgentSpec("oracle-map", "oracle-map"),
     "oracle-map-observable": AgentSpec("oracle-map-observable", "oracle-map-observable"),
     "observable": AgentSpec("observable", "observable"),
+    "frontier": AgentSpec("frontier", "frontier"),
 }
 #: Baselines LEAPS is compared with in the relative-improvement plot.
 BASELINES = ("random", "pure", "aug", "controller")

@@ -12,7 +12,7 @@ from leaps_mj.planning import agents
 
 #: Agent names accepted by :func:`make_agent`.
 AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable",
-               "observable", "controller", "aug")
+               "observable", "frontier", "controller", "aug")
 
 
 def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: int = 0, **kwargs) -> agents.Agent:
@@ -52,6 +52,8 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
         return agents.ObservableMapOracleAgent(env, seed)
     if name == "observable":
         return agents.ObservableAgent(env, seed)
+    if name == "frontier":
+        return agents.FrontierAgent(seed)
     if name == "aug":
         from leaps_mj.learning import baselines
 

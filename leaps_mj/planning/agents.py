@@ -31,7 +31,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import scipy.ndimage
 
-from leaps_mj.environment import expert, goal_teacher, looking_expert, map_navigation, observable_expert
+from leaps_mj.environment import expert, frontier, goal_teacher, looking_expert, map_navigation, observable_expert
 from leaps_mj.planning import semantic
 from leaps_mj.world import rooms
 
@@ -241,6 +241,54 @@ class ObservableMapOracleAgent(MapOracleAgent):
 
     name = "oracle-map-observable"
     teacher_class = goal_teacher.ObservableTeacherGoals
+
+
+#: Turns of :class:`FrontierAgent`'s first look around (30° each: a full circle).
+SCAN_TURNS = 12
+
+
+class FrontierAgent:
+    """The map-goal walk with frontier goals (:class:`leaps_mj.environment.frontier.FrontierGoals`):
+    the same driver as the map-goal sub-policy, its goals chosen by rule from its own map, not learned.
+
+    It first turns a full circle (:data:`SCAN_TURNS` turns, fewer once objects
+    only the target's type has are mapped), so that the frontiers and targets
+    it then chooses from include those behind it.
+
+    Args:
+      seed: seed of the planner's unsticking moves.
+      width, height: resolution of the frames its map is built from.
+    """
+
+    name = "frontier"
+
+    def __init__(self, seed: int = 0, width: int = 40, height: int = 30):
+        self.goals = frontier.FrontierGoals()
+        self.width, self.height = width, height
+        self.seed = seed
+        self.driver: map_navigation.GoalDriver | None = None
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target, rooms.GRAPH_NODES)
+        self.driver = map_navigation.GoalDriver(self.target, self.width, self.height, cues=True, semantic=True)
+        self.driver.reset(self.seed)
+        self.goals.reset()
+        self._turns = 0
+
+    def step(self, timestep) -> int:
+        self.driver.observe(timestep.observation)
+        if self._turns < SCAN_TURNS and not self.goals.target_confirmed(self.driver.mapper):
+            self._turns += 1
+            return expert.LEFT
+        self._turns = SCAN_TURNS
+        goal = self.goals.cell(self.driver)
+        if self.driver.needs_goal():
+            self.driver.set_goal(goal)
+        return self.driver.act()
+
+    def info(self) -> dict:
+        return {"subtarget": self.target, "plan": [], "belief": None}
 
 
 @dataclasses.dataclass(frozen=True)
