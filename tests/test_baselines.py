@@ -171,3 +171,20 @@ def test_tiny_controller_trainer_saves_resumes_and_validates(tiny_dataset, tmp_p
         train_controller.Trainer(dataclasses.replace(config, lr=0.5), tmp_path, progress=False)
     with pytest.raises(ValueError, match="subpolicy"):
         train_controller.resolve_subpolicy("best")
+
+
+def test_controller_trains_over_the_map_goal_sub_policy_of_a_folder(tiny_dataset, tmp_path, capsys):
+    from leaps_mj.learning import goal_policy
+
+    argv = ["--preset", "tiny", "--dataset", str(tiny_dataset), "--out", str(tmp_path), "--no-progress",
+            "--policy-dir", str(goal_policy.DEFAULT_DIR)]
+    assert train_controller.main(argv) == 0
+    assert "sub-policy learned" in capsys.readouterr().out
+    config = dataclasses.replace(train_controller.PRESETS["tiny"], dataset=str(tiny_dataset), subpolicy="learned",
+                                 policy_dir=str(goal_policy.DEFAULT_DIR))
+    assert train_controller.Trainer(config, tmp_path, progress=False).finished  # the run's config: this folder's
+    with pytest.raises(ValueError, match="another configuration"):
+        train_controller.Trainer(dataclasses.replace(config, policy_dir=None), tmp_path, progress=False)
+    assert isinstance(train_controller.make_subpolicy(config, None, 0), goal_policy.GoalSubPolicy)
+    with pytest.raises(ValueError, match="policy_dir 'x' needs subpolicy 'learned'"):
+        dataclasses.replace(config, subpolicy="local", policy_dir="x")

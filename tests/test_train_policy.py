@@ -221,8 +221,7 @@ def test_the_train_command_reports_bad_values_in_one_line(capsys):
 def test_shared_run_with_aux_trains_one_network_that_serves_every_node(tiny_dataset, tmp_path):
     """A tiny shared run with auxiliary losses: unrolls carry the node one-hot and consistent labels,
     the losses are finite, and shared.pt serves each graph node through LearnedSubPolicy."""
-    from leaps_mj.evaluation import harness
-    from leaps_mj.learning import policies
+    from leaps_mj.learning import policies, policy_folder
     from leaps_mj.world import rooms
 
     config = tiny(tiny_dataset, total_steps=4 * 16, method="dagger", shared=True, aux_coef=0.5, max_start_doors=2)
@@ -249,7 +248,7 @@ def test_shared_run_with_aux_trains_one_network_that_serves_every_node(tiny_data
     train_policy.run_target(config, train_policy.SHARED, tmp_path, progress=False)
     assert not (tmp_path / "kitchen.pt").exists()
     assert policies.folder_targets(tmp_path) == rooms.GRAPH_NODES
-    policy = harness.learned_subpolicy(str(tmp_path))
+    policy = policy_folder.load(str(tmp_path))
     assert policy.nets["kitchen"] is policy.nets["indoor"] and policy.nets["kitchen"].config.target_input
 
 

@@ -211,34 +211,9 @@ def _init_worker(config: EvalConfig, model: semantic.SemanticModel | None, recor
     _WORKER["recorders"] = {}
     _WORKER["subpolicy"] = None
     if config.subpolicy == "learned":
-        _WORKER["subpolicy"] = learned_subpolicy(config.policy_dir, config.temperature)
+        from leaps_mj.learning import policy_folder
 
-
-def learned_subpolicy(policy_dir: str | None, temperature: float = 1.0):
-    """The learned sub-policies: the shipped ones, or those in ``policy_dir`` (every ``<node>.pt``
-    checkpoint, and a ``shared.pt`` network for the nodes without one), sampling at ``temperature``;
-    or, where ``policy_dir`` holds a ``goal.pt``, the map-goal sub-policy
-    (:class:`leaps_mj.learning.goal_policy.GoalSubPolicy`, deterministic) for every node.
-
-    Raises:
-      ValueError: if the folder holds no checkpoint of a graph node, or one is unreadable; for a
-        temperature other than 1 with the map-goal sub-policy, which does not sample.
-    """
-    from leaps_mj.learning import goal_policy, policies
-    from leaps_mj.world import rooms
-
-    if policy_dir is None:
-        return policies.load_default(temperature=temperature)
-    if (pathlib.Path(policy_dir) / goal_policy.GOAL).is_file():
-        if temperature != 1.0:
-            raise ValueError(f"temperature {temperature!r}: the map-goal sub-policy in {policy_dir!r} does not "
-                             f"sample its actions; expected 1")
-        return goal_policy.GoalSubPolicy(policy_dir)
-    targets = policies.folder_targets(policy_dir)
-    if not targets:
-        raise ValueError(f"policy folder {policy_dir!r} holds no sub-policy checkpoint <node>.pt or shared.pt "
-                         f"for any of {list(rooms.GRAPH_NODES)}")
-    return policies.LearnedSubPolicy(policy_dir, targets, temperature=temperature)
+        _WORKER["subpolicy"] = policy_folder.load(config.policy_dir, config.temperature)
 
 
 def _build_agent(spec: AgentSpec, seed: int):

@@ -352,8 +352,10 @@ def _prepare_policies(config: harness.EvalConfig, nodes: set[str]) -> None:
     """
     import torch
 
+    from leaps_mj.learning import policy_folder
+
     torch.set_num_threads(1)
-    loaded = harness.learned_subpolicy(config.policy_dir).targets
+    loaded = policy_folder.load(config.policy_dir).targets
     missing = [n for n in rooms.GRAPH_NODES if n in nodes and n not in loaded]
     if missing:
         raise ValueError(f"policy folder {config.policy_dir!r} has no checkpoint for nodes {missing} "

@@ -90,7 +90,7 @@ class ControllerWorker:
     Args:
       config: The run's ``train_controller.TrainConfig``.
       run_episode: ``train_controller.run_training_episode`` (env, agent, config) -> record.
-      make_subpolicy: ``train_controller.make_subpolicy`` (kind, env, seed) -> sub-policy.
+      make_subpolicy: ``train_controller.make_subpolicy`` (config, env, seed) -> sub-policy.
     """
 
     def __init__(self, config, run_episode: Callable, make_subpolicy: Callable):
@@ -113,7 +113,7 @@ class ControllerWorker:
         after = self.env.task.random.get_state()
         records = []
         for k in episodes:
-            sub = self._make_subpolicy(c.subpolicy, self.env, episode_seed(c, 2, update, k))
+            sub = self._make_subpolicy(c, self.env, episode_seed(c, 2, update, k))
             agent = baselines.ControllerAgent(sub, self.net, c.option_steps, seed=episode_seed(c, 3, update, k))
             record = self._run_episode(_Replay(self.env, specs[k]), agent, c)
             records.append({**record, "episode": specs[k]})

@@ -1,7 +1,7 @@
 """Trains the HRL baseline's LSTM controller with A2C over options.
 
 ``python -m leaps_mj.train controller --preset tiny|cpu|paper --out DIR [--subpolicy auto|local|learned]
-[--backend local|ray [--ray-address ADDR] [--num-workers N]]``
+[--policy-dir DIR] [--backend local|ray [--ray-address ADDR] [--num-workers N]]``
 
 The controller (:class:`leaps_mj.learning.nets.ControllerNet`, LSTM 50) acts in the
 option-level problem of :class:`leaps_mj.learning.baselines.ControllerAgent`: each
@@ -15,8 +15,10 @@ the loss ``-log π(a) (R - V) + value_coef (R - V)² / 2 - entropy H(π)`` over
 all their decisions is minimised by one Adam step (lr 1e-3, gradient norm
 clipped at ``max_grad_norm``).
 
-Sub-policies (``--subpolicy``): ``learned`` = ``leaps_mj.learning.policies.load_default()``
-(then the environment renders at their resolution), ``local`` =
+Sub-policies (``--subpolicy``): ``learned`` = ``leaps_mj.learning.policies.load_default()``,
+or with ``--policy-dir`` the sub-policies of that folder (per-target μ(θ) or the map-goal
+network, :func:`leaps_mj.learning.policy_folder.load`); the environment then renders at their
+resolution. ``local`` =
 :class:`leaps_mj.planning.agents.LocalExpertPolicy`, ``auto`` = learned when the
 shipped checkpoints load, else local. The choice is stored in the
 checkpoint.
@@ -68,6 +70,7 @@ class TrainConfig:
     Attributes:
       dataset: House dataset name or folder (train split; valid for the final check).
       subpolicy: "local" or "learned" ("auto" is resolved before a run starts).
+      policy_dir: With ``subpolicy="learned"``, the folder of sub-policy checkpoints (None: the shipped μ(θ)).
       width, height: Environment resolution (the learned sub-policies' own).
       horizon: Steps of a training episode.
       option_steps: N, the longest option.
@@ -88,6 +91,7 @@ class TrainConfig:
 
     dataset: str = dataset_lib.CANONICAL
     subpolicy: str = "local"
+    policy_dir: str | None = None
     width: int = 40
     height: int = 30
     horizon: int = 300
@@ -109,6 +113,8 @@ class TrainConfig:
     def __post_init__(self):
         if self.subpolicy not in ("local", "learned"):
             raise ValueError(f"subpolicy {self.subpolicy!r}: expected 'local' or 'learned'")
+        if self.policy_dir is not None and self.subpolicy != "learned":
+            raise ValueError(f"policy_dir {self.policy_dir!r} needs subpolicy 'learned', not {self.subpolicy!r}")
         for name in ("horizon", "option_steps", "lstm", "episodes", "batch_episodes", "eval_episodes",
                      "eval_horizon"):
             value = getattr(self, name)
@@ -158,12 +164,12 @@ def resolve_subpolicy(choice: str) -> str:
     return "learned"
 
 
-def make_subpolicy(kind: str, env, seed: int):
-    """The sub-policy of a run: the shipped learned ones or the local expert of ``env``."""
-    if kind == "learned":
-        from leaps_mj.learning import policies
+def make_subpolicy(config: TrainConfig, env, seed: int):
+    """The sub-policy of a run: the learned ones (shipped, or ``config.policy_dir``'s) or the local expert of ``env``."""
+    if config.subpolicy == "learned":
+        from leaps_mj.learning import policy_folder
 
-        return policies.load_default(seed=seed)
+        return policy_folder.load(config.policy_dir, seed=seed)
     return agents.LocalExpertPolicy(env, seed=seed)
 
 
@@ -305,7 +311,7 @@ class Trainer(trainer_lib.Trainer):
         if self.backend == "ray":
             return self._ray.play(self.net, self.update)
         # A fresh sub-policy per update: the local expert caches distance fields per house.
-        sub = make_subpolicy(c.subpolicy, self._env, self._seed(2, self.update))
+        sub = make_subpolicy(c, self._env, self._seed(2, self.update))
         agent = baselines.ControllerAgent(sub, self.net, c.option_steps, seed=self._seed(3, self.update))
         return [run_training_episode(self._env, agent, c) for _ in range(c.batch_episodes)]
 
@@ -343,9 +349,9 @@ class Trainer(trainer_lib.Trainer):
             for i in tqdm.tqdm(indices, desc="controller validation", disable=not self.progress):
                 seed = episodes.episode_seed(c.seed, i)
                 for name, agent in (
-                        ("controller", baselines.ControllerAgent(make_subpolicy(c.subpolicy, env, seed), self.net,
+                        ("controller", baselines.ControllerAgent(make_subpolicy(c, env, seed), self.net,
                                                                  c.option_steps, seed=seed)),
-                        ("pure", agents.PureAgent(make_subpolicy(c.subpolicy, env, seed)))):
+                        ("pure", agents.PureAgent(make_subpolicy(c, env, seed)))):
                     results[name].append(episodes.run_episode(env, agent, specs[i], c.eval_horizon)["success"])
         finally:
             env.close()
@@ -360,25 +366,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", default="runs/controller", help="output folder (resumed if it holds a run)")
     parser.add_argument("--subpolicy", choices=SUBPOLICIES, default="auto",
                         help="sub-policies: learned (shipped), local (local expert), auto (learned if shipped)")
+    parser.add_argument("--policy-dir", default=None,
+                        help="with --subpolicy learned: a folder of sub-policy checkpoints (<node>.pt, shared.pt or a "
+                             "map-goal goal.pt) instead of the shipped ones")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--stop-after", type=int, default=None,
                         help="stop after this many more updates (checkpointed; rerun resumes)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     backend_options.add_backend_arguments(parser, "training episodes", "each playing batch_episodes / N episodes per "
                                    "update (default: one per cluster CPU, at most batch_episodes)")
-    trainer_lib.add_config_arguments(parser, TrainConfig, skip=("subpolicy",))
+    trainer_lib.add_config_arguments(parser, TrainConfig, skip=("subpolicy", "policy_dir"))
     args = parser.parse_args(argv)
     for name in ("threads", "stop_after"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} {getattr(args, name)}: expected a positive integer")
-    overrides = trainer_lib.config_overrides(args, TrainConfig, skip=("subpolicy",))
-    subpolicy = resolve_subpolicy(args.subpolicy)
+    overrides = trainer_lib.config_overrides(args, TrainConfig, skip=("subpolicy", "policy_dir"))
+    subpolicy = "learned" if args.policy_dir is not None and args.subpolicy == "auto" else \
+        resolve_subpolicy(args.subpolicy)
     if subpolicy == "learned":
-        from leaps_mj.learning import policies
+        from leaps_mj.learning import policy_folder
 
-        shipped = policies.load_default()
-        overrides.update(width=shipped.width, height=shipped.height)
-    config = dataclasses.replace(PRESETS[args.preset], subpolicy=subpolicy, **overrides)
+        loaded = policy_folder.load(args.policy_dir)
+        overrides.update(width=loaded.width, height=loaded.height)
+    config = dataclasses.replace(PRESETS[args.preset], subpolicy=subpolicy, policy_dir=args.policy_dir,
+                                 **overrides)
     torch.set_num_threads(args.threads)
     trainer = Trainer(config, args.out, progress=not args.no_progress, backend=args.backend,
                       num_workers=args.num_workers, ray_address=args.ray_address)

@@ -1,0 +1,39 @@
+"""The learned sub-policies of a folder, whichever kind its checkpoints are.
+
+Evaluation (``--policy-dir``) and the controller's trainer both run "the
+learned sub-policies in this folder": per-target CNN+LSTM networks μ(θ)
+(``<node>.pt``, ``shared.pt``) or the map-goal network (``goal.pt``). This
+module decides which from the files, so that both load a folder the same way.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+from leaps_mj.learning import goal_policy, policies
+from leaps_mj.world import rooms
+
+
+def load(policy_dir: str | os.PathLike | None, temperature: float = 1.0, seed: int = 0):
+    """The learned sub-policies: the shipped μ(θ), or those in ``policy_dir`` (every ``<node>.pt``
+    checkpoint, and a ``shared.pt`` network for the nodes without one), sampling at ``temperature``;
+    or, where ``policy_dir`` holds a ``goal.pt``, the map-goal sub-policy
+    (:class:`leaps_mj.learning.goal_policy.GoalSubPolicy`, deterministic) for every node.
+
+    Raises:
+      ValueError: if the folder holds no checkpoint of a graph node, or one is unreadable; for a
+        temperature other than 1 with the map-goal sub-policy, which does not sample.
+    """
+    if policy_dir is None:
+        return policies.load_default(seed=seed, temperature=temperature)
+    if (pathlib.Path(policy_dir) / goal_policy.GOAL).is_file():
+        if temperature != 1.0:
+            raise ValueError(f"temperature {temperature!r}: the map-goal sub-policy in {str(policy_dir)!r} does not "
+                             f"sample its actions; expected 1")
+        return goal_policy.GoalSubPolicy(policy_dir, seed=seed)
+    targets = policies.folder_targets(policy_dir)
+    if not targets:
+        raise ValueError(f"policy folder {str(policy_dir)!r} holds no sub-policy checkpoint <node>.pt or shared.pt "
+                         f"for any of {list(rooms.GRAPH_NODES)}")
+    return policies.LearnedSubPolicy(policy_dir, targets, seed=seed, temperature=temperature)
