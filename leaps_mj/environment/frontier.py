@@ -62,6 +62,8 @@ DOOR_BONUS = 2.0
 PATIENCE = 24
 #: Metres from a goal within which it is reached.
 REACHED = 0.5
+#: Steps of turning on the spot (30° each: a full circle) when there is nowhere to go, before looking again.
+LOOK_STEPS = 12
 #: Cells around the agent's trail counted as mapped.
 TRAIL = 2
 
@@ -82,7 +84,7 @@ class FrontierGoals:
     def reset(self) -> None:
         """A new run: no goal, nothing rejected."""
         self.goal: np.ndarray | None = None
-        self.kind: str | None = None  # "target" or "frontier"
+        self.kind: str | None = None  # "target", "frontier" or "look"
         self._age = 0
         self._waited = 0
         self._rejected: list[np.ndarray] = []
@@ -121,7 +123,7 @@ class FrontierGoals:
                 door = scipy.ndimage.binary_dilation(grid[_DOOR].astype(bool), structure=_EIGHT)
                 self._set(mapper, np.where(frontier, dist - DOOR_BONUS * door, np.inf), "frontier")
         if self.goal is None:  # nothing to go to: stand and look around
-            self.goal, self.kind = np.asarray(pose[:2], np.float64), "look"
+            self.goal, self.kind, self._age = np.asarray(pose[:2], np.float64), "look", 0
         return self._window(mapper, pose)
 
     @staticmethod
@@ -184,7 +186,7 @@ class FrontierGoals:
                 return False
             return True
         if self.kind == "look":
-            return self._age <= 12 and not targets.any()  # a full turn, then look again for a frontier
+            return self._age <= LOOK_STEPS and not targets.any()
         if reached or self._age > PATIENCE or targets.any():
             return False
         row, col, _ = mapper.cells(self.goal[0], self.goal[1])
