@@ -15,33 +15,28 @@ W, H = 40, 30
 C = {name: i for i, name in enumerate(mapping.CHANNELS)}
 
 
-def _driver(target: str) -> types.SimpleNamespace:
-    """A driver stand-in at the grid's centre facing east, with an anchored, empty semantic map."""
+def _room(target: str) -> tuple[types.SimpleNamespace, int, int]:
+    """A driver stand-in at the grid's centre facing east, its semantic map showing only a walled square
+    room of floor around it with a doorway in the east wall; the driver and the room's centre cell."""
     mapper = mapping.EgoMapper(target, W, H, semantic=True)
     seg = np.full((H, W), rooms.seg_class_index("empty"))
     mapper.update(seg, np.ones((H, W)), np.zeros(3))
-    mapper.grid[:] = 0
-    return types.SimpleNamespace(mapper=mapper, pose=np.array([0.125, 0.125, 0.0]))
-
-
-def _room(driver, half: int = 12, door_col: int | None = None) -> tuple[int, int]:
-    """A walled square room of floor around the agent (a gap in its east wall at ``door_col``); its centre cell."""
-    g, c = driver.mapper.grid, mapping.GRID // 2
+    g, c, half = mapper.grid, mapping.GRID // 2, 12
+    g[:] = 0
     g[C["floor"], c - half:c + half + 1, c - half:c + half + 1] = 1
     for side in (c - half - 1, c + half + 1):
         g[C["obstacle"], side, c - half - 1:c + half + 2] = 1
         g[C["obstacle"], c - half - 1:c + half + 2, side] = 1
-    if door_col is not None:
-        g[C["obstacle"], c - 2:c + 3, c + half + 1] = 0
-        g[C["door"], c - 2:c + 3, c + half + 1] = 1
-    driver.mapper.blocked[:] = g[C["obstacle"]].astype(bool)
+    g[C["obstacle"], c - 2:c + 3, c + half + 1] = 0
+    g[C["door"], c - 2:c + 3, c + half + 1] = 1
+    mapper.blocked[:] = g[C["obstacle"]].astype(bool)
     g[C["visited"], c, c] = 1
-    return c, c
+    return types.SimpleNamespace(mapper=mapper, pose=np.array([0.125, 0.125, 0.0])), c, c
 
 
-def _mark(driver, node: str, cls: str, rows, cols) -> None:
+def _mark(driver, cls: str, rows, cols) -> None:
     """Marks a see-object of class ``cls`` as the mapper would: target channel, furniture, semantic channels."""
-    g, index = driver.mapper.grid, rooms.seg_class_index(cls)
+    g = driver.mapper.grid
     g[C["furniture"], rows, cols] = 1
     driver.mapper.blocked[rows, cols] = True
     if cls in rooms.SEE_OBJECTS.get(driver.mapper.target, ()):
@@ -49,7 +44,14 @@ def _mark(driver, node: str, cls: str, rows, cols) -> None:
     for k, room in enumerate(mapping.SEMANTIC):
         if cls in rooms.SEE_OBJECTS[room]:
             g[len(mapping.CHANNELS) + k, rows, cols] = 1
-    assert index >= 0 and node in rooms.GRAPH_NODES
+
+
+def _dining_room_table() -> tuple[types.SimpleNamespace, int, int]:
+    """The room of :func:`_room`, looking for the dining room, with a table (a class the living room and
+    the office share) in it."""
+    driver, r, c = _room("dining_room")
+    _mark(driver, "table", slice(r + 5, r + 7), slice(c - 6, c - 4))
+    return driver, r, c
 
 
 def _goal_rc(driver, goals) -> tuple[int, int]:
@@ -58,8 +60,7 @@ def _goal_rc(driver, goals) -> tuple[int, int]:
 
 
 def test_with_nothing_of_the_target_mapped_the_goal_is_a_frontier_through_the_door():
-    driver = _driver("bedroom")
-    r, c = _room(driver, door_col=1)
+    driver, r, c = _room("bedroom")
     goals = frontier.FrontierGoals()
     cell = goals.cell(driver)
     assert goals.kind == "frontier" and 0 <= cell < mapping.WINDOW ** 2
@@ -69,9 +70,8 @@ def test_with_nothing_of_the_target_mapped_the_goal_is_a_frontier_through_the_do
 
 
 def test_a_mapped_target_object_is_approached_from_its_side_of_the_walls():
-    driver = _driver("bedroom")
-    r, c = _room(driver, door_col=1)
-    _mark(driver, "bedroom", "bed", slice(r + 6, r + 9), slice(c - 9, c - 5))
+    driver, r, c = _room("bedroom")
+    _mark(driver, "bed", slice(r + 6, r + 9), slice(c - 9, c - 5))
     goals = frontier.FrontierGoals()
     goals.cell(driver)
     assert goals.kind == "target" and goals.target_confirmed(driver.mapper)
@@ -83,22 +83,18 @@ def test_a_mapped_target_object_is_approached_from_its_side_of_the_walls():
 
 
 def test_a_shared_object_beside_another_rooms_own_is_no_target():
-    driver = _driver("dining_room")
-    r, c = _room(driver, door_col=1)
-    _mark(driver, "dining_room", "table", slice(r + 5, r + 7), slice(c - 6, c - 4))
+    driver, r, c = _dining_room_table()
     goals = frontier.FrontierGoals()
     goals.cell(driver)
     assert goals.kind == "target" and not goals.target_confirmed(driver.mapper)  # a table alone: a guess
-    _mark(driver, "living_room", "sofa", slice(r + 8, r + 10), slice(c - 6, c - 3))  # beside a sofa
+    _mark(driver, "sofa", slice(r + 8, r + 10), slice(c - 6, c - 3))  # beside a sofa
     goals.reset()
     goals.cell(driver)
     assert goals.kind == "frontier"
 
 
 def test_a_target_goal_stood_at_without_success_is_rejected():
-    driver = _driver("dining_room")
-    r, c = _room(driver, door_col=1)
-    _mark(driver, "dining_room", "table", slice(r + 5, r + 7), slice(c - 6, c - 4))
+    driver, _, _ = _dining_room_table()
     goals = frontier.FrontierGoals()
     goals.cell(driver)
     first = goals.goal.copy()

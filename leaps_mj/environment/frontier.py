@@ -96,9 +96,11 @@ class FrontierGoals:
         here = np.array(mapper.cells(pose[0], pose[1])[:2]).clip(0, mapping.GRID - 1)
         targets = self._targets(mapper)
         self._age += 1
+        rejected = len(self._rejected)
         if self.goal is not None and self._keep(mapper, pose, targets):
             return self._window(mapper, pose)
-        targets = self._targets(mapper)  # less what _keep just rejected
+        if len(self._rejected) > rejected:
+            targets = self._targets(mapper)  # less what _keep just rejected
         dist = self._distances(mapper, here)
         floor = (grid[_FLOOR] | grid[_DOOR]).astype(bool) & np.isfinite(dist)
         self.goal, self.kind = None, None
@@ -140,29 +142,32 @@ class FrontierGoals:
         return dist
 
     @staticmethod
-    def _contradicted(mapper: mapping.EgoMapper) -> np.ndarray:
-        """Cells within :data:`CONTRADICT_RADIUS` of an object of a class that other room types have and
-        the target has not (all False without the semantic channels)."""
+    def _semantic(mapper: mapping.EgoMapper) -> tuple[np.ndarray, np.ndarray] | None:
+        """(cells of the target type's see-object classes, cells of any other type's), from the map's
+        semantic channels; None without them or for a target without see-objects (``outdoor``, ``indoor``)."""
         grid, target = mapper.grid, mapper.target
         if len(grid) == len(mapping.CHANNELS) or target not in mapping.SEMANTIC:
-            return np.zeros(grid.shape[1:], bool)
+            return None
         semantic = grid[len(mapping.CHANNELS):].astype(bool)
         own = mapping.SEMANTIC.index(target)
-        others = np.delete(semantic, own, axis=0).any(0) & ~semantic[own]
-        return scipy.ndimage.binary_dilation(others, iterations=round(CONTRADICT_RADIUS / mapping.CELL))
+        return semantic[own], np.delete(semantic, own, axis=0).any(0)
 
-    @staticmethod
-    def _confirmed(mapper: mapping.EgoMapper, targets: np.ndarray) -> np.ndarray:
+    def _contradicted(self, mapper: mapping.EgoMapper) -> np.ndarray:
+        """Cells within :data:`CONTRADICT_RADIUS` of an object of a class that other room types have and
+        the target has not (all False without the semantic channels)."""
+        channels = self._semantic(mapper)
+        if channels is None:
+            return np.zeros(mapper.grid.shape[1:], bool)
+        own, others = channels
+        return scipy.ndimage.binary_dilation(others & ~own, iterations=round(CONTRADICT_RADIUS / mapping.CELL))
+
+    def _confirmed(self, mapper: mapping.EgoMapper, targets: np.ndarray) -> np.ndarray:
         """The target cells of classes no other room type has (all of them for a target without
         semantic channels: ``outdoor``'s cues)."""
-        grid, target = mapper.grid, mapper.target
-        if target not in mapping.SEMANTIC:
+        if mapper.target not in mapping.SEMANTIC:
             return targets
-        if len(grid) == len(mapping.CHANNELS):
-            return np.zeros_like(targets)
-        semantic = grid[len(mapping.CHANNELS):].astype(bool)
-        own = mapping.SEMANTIC.index(target)
-        return targets & ~np.delete(semantic, own, axis=0).any(0)
+        channels = self._semantic(mapper)
+        return np.zeros_like(targets) if channels is None else targets & ~channels[1]
 
     def _targets(self, mapper: mapping.EgoMapper) -> np.ndarray:
         """The target's mapped cells, less those near rejected goals or contradicted."""

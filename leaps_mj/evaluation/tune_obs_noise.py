@@ -135,23 +135,21 @@ def tune(config: TuneConfig, prior: pathlib.Path, out: pathlib.Path, subpolicy: 
                              workers=workers, progress=progress, model=model)
         summary = evaluate.summarize(table, [config.horizon])
         per_point.update({(*psi, n): summary[label(psi, config.rule)][str(config.horizon)]["all"]
-                          for psi in pairs})
-    per_point = {point: per_point[point] for point in config.grid()}
+                          for psi in pairs})  # in grid order: N slowest
     return choose({point: r["rate"] for point, r in per_point.items()}), per_point
 
 
-def _floats(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated numbers") from None
+def _grid(cast, what: str):
+    """An argparse type reading a comma-separated grid of ``cast`` values (``what`` names them in errors)."""
+    def parse(text: str) -> tuple:
+        try:
+            return tuple(cast(v) for v in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated {what}") from None
+    return parse
 
 
-def _ints(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers") from None
+_floats, _ints = _grid(float, "numbers"), _grid(int, "integers")
 
 
 def main(argv=None) -> int:

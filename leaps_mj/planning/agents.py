@@ -194,14 +194,59 @@ class ObservableAgent(OracleAgent):
     expert_class = observable_expert.ObservableExpert
 
 
-class MapOracleAgent:
-    """The map-goal sub-policy's walk with the teacher's goals instead of the network's: its ceiling.
+class MapWalkAgent:
+    """The map-goal sub-policy's walk with goals from elsewhere than its network (a teacher, a rule).
 
     A :class:`leaps_mj.environment.map_navigation.GoalDriver` builds the
     agent's own map from its frames (subsampled to ``width`` x ``height``, the
-    shipped network's resolution) and walks to the goals of
-    :class:`leaps_mj.environment.goal_teacher.TeacherGoals`, which read the
-    house's map.
+    shipped network's resolution) and walks to the goals :meth:`goal` gives,
+    choosing a new one when the driver asks for it.
+
+    Args:
+      seed: seed of the planner's unsticking moves.
+      width, height: resolution of the frames its map is built from.
+    """
+
+    #: Whether the walk's map marks the target's cues and every room type's see-objects (``GoalDriver``'s options).
+    cues = False
+    semantic = False
+
+    def __init__(self, seed: int = 0, width: int = 40, height: int = 30):
+        self.width, self.height = width, height
+        self.seed = seed
+        self.driver: map_navigation.GoalDriver | None = None
+        self.target: str | None = None
+
+    def reset(self, target: str) -> None:
+        self.target = _check_target(target, rooms.GRAPH_NODES)
+        self.driver = map_navigation.GoalDriver(self.target, self.width, self.height, cues=self.cues,
+                                                semantic=self.semantic)
+        self.driver.reset(self.seed)
+
+    def step(self, timestep) -> int:
+        self.driver.observe(timestep.observation)
+        return self._act()
+
+    def _act(self) -> int:
+        """This step's action, the frame already on the map."""
+        goal = self.goal()  # every step: a teacher's memory updates
+        if self.driver.needs_goal():
+            self.driver.set_goal(goal)
+        return self.driver.act()
+
+    def goal(self) -> int:
+        """The goal at this step, a row-major index into the driver's egocentric window."""
+        raise NotImplementedError
+
+    def info(self) -> dict:
+        return {"subtarget": self.target, "plan": [], "belief": None}
+
+
+class MapOracleAgent(MapWalkAgent):
+    """The map-goal sub-policy's walk with the teacher's goals instead of the network's: its ceiling.
+
+    The goals are those of :class:`leaps_mj.environment.goal_teacher.TeacherGoals`,
+    which read the house's map.
 
     Args:
       env: the environment it acts in (the teacher reads its state).
@@ -213,26 +258,11 @@ class MapOracleAgent:
     teacher_class = goal_teacher.TeacherGoals
 
     def __init__(self, env, seed: int = 0, width: int = 40, height: int = 30):
+        super().__init__(seed, width, height)
         self.teacher = self.teacher_class(env, seed)
-        self.width, self.height = width, height
-        self.seed = seed
-        self.driver: map_navigation.GoalDriver | None = None
-        self.target: str | None = None
 
-    def reset(self, target: str) -> None:
-        self.target = _check_target(target, rooms.GRAPH_NODES)
-        self.driver = map_navigation.GoalDriver(self.target, self.width, self.height)
-        self.driver.reset(self.seed)
-
-    def step(self, timestep) -> int:
-        self.driver.observe(timestep.observation)
-        goal = self.teacher.cell(self.driver.mapper, self.driver.pose)  # every step: a teacher's memory updates
-        if self.driver.needs_goal():
-            self.driver.set_goal(goal)
-        return self.driver.act()
-
-    def info(self) -> dict:
-        return {"subtarget": self.target, "plan": [], "belief": None}
+    def goal(self) -> int:
+        return self.teacher.cell(self.driver.mapper, self.driver.pose)
 
 
 class ObservableMapOracleAgent(MapOracleAgent):
@@ -247,7 +277,7 @@ class ObservableMapOracleAgent(MapOracleAgent):
 SCAN_TURNS = 12
 
 
-class FrontierAgent:
+class FrontierAgent(MapWalkAgent):
     """The map-goal walk with frontier goals (:class:`leaps_mj.environment.frontier.FrontierGoals`):
     the same driver as the map-goal sub-policy, its goals chosen by rule from its own map, not learned.
 
@@ -261,34 +291,27 @@ class FrontierAgent:
     """
 
     name = "frontier"
+    cues = True
+    semantic = True
 
     def __init__(self, seed: int = 0, width: int = 40, height: int = 30):
+        super().__init__(seed, width, height)
         self.goals = frontier.FrontierGoals()
-        self.width, self.height = width, height
-        self.seed = seed
-        self.driver: map_navigation.GoalDriver | None = None
-        self.target: str | None = None
 
     def reset(self, target: str) -> None:
-        self.target = _check_target(target, rooms.GRAPH_NODES)
-        self.driver = map_navigation.GoalDriver(self.target, self.width, self.height, cues=True, semantic=True)
-        self.driver.reset(self.seed)
+        super().reset(target)
         self.goals.reset()
         self._turns = 0
 
-    def step(self, timestep) -> int:
-        self.driver.observe(timestep.observation)
+    def _act(self) -> int:
         if self._turns < SCAN_TURNS and not self.goals.target_confirmed(self.driver.mapper):
             self._turns += 1
             return expert.LEFT
         self._turns = SCAN_TURNS
-        goal = self.goals.cell(self.driver)
-        if self.driver.needs_goal():
-            self.driver.set_goal(goal)
-        return self.driver.act()
+        return super()._act()
 
-    def info(self) -> dict:
-        return {"subtarget": self.target, "plan": [], "belief": None}
+    def goal(self) -> int:
+        return self.goals.cell(self.driver)
 
 
 @dataclasses.dataclass(frozen=True)
