@@ -60,6 +60,23 @@ def test_driver_goes_round_what_it_mapped():
     np.testing.assert_allclose(driver.navigator.waypoint(np.array([0.0, 0.0, 0.0]), (2.0, -0.05)), (2.0, -0.05))
 
 
+def test_waypoints_cut_a_corner_only_where_the_map_shows_the_shortcut_free():
+    driver = map_navigation.GoalDriver("outdoor", W, H)
+    pose = np.array([0.0, 0.0, 0.0])
+    _empty_step(driver, pose)
+    nav, m = driver.navigator, driver.mapper
+    goal = (1.5, -1.5)  # ahead and to the right: open floor, the path runs straight at it
+    far = nav.waypoint(pose, goal)
+    assert math.hypot(*far[:2]) > 2 * mapping.CELL  # LOOKAHEAD cells down the path
+    # A post right of the agent's line to that waypoint: the shortcut would graze it, so it steers
+    # at a nearer cell of the path, whose straight way keeps the body off the post.
+    row, col, _ = m.cells(0.45, -0.2)
+    m.blocked[row, col] = True
+    near = nav.waypoint(pose, goal)
+    assert math.hypot(*near[:2]) < math.hypot(*far[:2])
+    assert nav._clear(pose, near) and not nav._clear(pose, far)
+
+
 def test_set_goal_reads_window_cells_around_the_pose():
     driver = map_navigation.GoalDriver("kitchen", W, H)
     pose = np.array([3.0, 1.0, math.pi / 2])  # facing +y
