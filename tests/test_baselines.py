@@ -188,3 +188,19 @@ def test_controller_trains_over_the_map_goal_sub_policy_of_a_folder(tiny_dataset
     assert isinstance(train_controller.make_subpolicy(config, None, 0), goal_policy.GoalSubPolicy)
     with pytest.raises(ValueError, match="policy_dir 'x' needs subpolicy 'learned'"):
         dataclasses.replace(config, subpolicy="local", policy_dir="x")
+
+
+def test_a_policy_folder_brings_its_own_controller(tmp_path):
+    from leaps_mj.evaluation import registry
+    from leaps_mj.learning import policy_folder
+
+    assert policy_folder.controller_path(None) == baselines.DEFAULT_CONTROLLER
+    assert policy_folder.controller_path(tmp_path) == baselines.DEFAULT_CONTROLLER  # none of its own
+    net = fixed_choice_net("garage")
+    nets.save_checkpoint(tmp_path / policy_folder.CONTROLLER, net, net.config, {"option_steps": 5, "subpolicy": "learned"})
+    assert policy_folder.controller_path(tmp_path) == tmp_path / policy_folder.CONTROLLER
+    agent = registry.make_agent("controller", None, subpolicy=FakeSubPolicy(),
+                                controller=policy_folder.controller_path(tmp_path))
+    assert agent.option_steps == 5
+    with pytest.raises(ValueError, match="takes no options"):
+        registry.make_agent("pure", None, subpolicy=FakeSubPolicy(), controller=tmp_path)

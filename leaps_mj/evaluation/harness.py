@@ -227,6 +227,10 @@ def _build_agent(spec: AgentSpec, seed: int):
         if spec.psi_obs is not None:
             model = semantic.SemanticModel(model.prior, *spec.psi_obs)
         kwargs = {"model": model, "rule": spec.rule, "replan_every": config.replan_every}
+    if spec.name == "controller":
+        from leaps_mj.learning import policy_folder
+
+        kwargs = {"controller": policy_folder.controller_path(config.policy_dir)}
     subpolicy = _WORKER["subpolicy"]
     if spec.name == "aug":
         if "augmented" not in _WORKER:

@@ -27,14 +27,15 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
         ``leaps_mj.learning.policies.load_augmented()``).
       seed: seed of the agent's (and default sub-policy's) random draws.
       **kwargs: for "leaps": ``model`` (a SemanticModel) or ``prior`` (see
-        :func:`leaps_mj.planning.agents.load_model`), ``replan_every``, ``rule``.
+        :func:`leaps_mj.planning.agents.load_model`), ``replan_every``, ``rule``; for "controller":
+        ``controller``, the checkpoint's path (default: the shipped one, trained over the shipped μ(θ)).
 
     Raises:
       ValueError: for an unknown name or keyword arguments the agent does not take.
     """
     if name not in AGENT_NAMES:
         raise ValueError(f"unknown agent {name!r}; expected one of {list(AGENT_NAMES)}")
-    allowed = {"model", "prior", "replan_every", "rule"} if name == "leaps" else set()
+    allowed = {"leaps": {"model", "prior", "replan_every", "rule"}, "controller": {"controller"}}.get(name, set())
     if set(kwargs) - allowed:
         raise ValueError(f"agent {name!r} takes no options {sorted(set(kwargs) - allowed)}; "
                          f"expected a subset of {sorted(allowed)}")
@@ -67,7 +68,8 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
     if name == "controller":
         from leaps_mj.learning import baselines
 
-        return baselines.ControllerAgent.from_checkpoint(sub, seed=seed)
+        return baselines.ControllerAgent.from_checkpoint(sub, kwargs.get("controller", baselines.DEFAULT_CONTROLLER),
+                                                         seed=seed)
     if "model" in kwargs and "prior" in kwargs:
         raise ValueError("give the LEAPS agent either model or prior, not both")
     model = kwargs.pop("model", None) or agents.load_model(kwargs.pop("prior", agents.DEFAULT_PRIOR))

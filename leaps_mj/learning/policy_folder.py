@@ -11,8 +11,11 @@ from __future__ import annotations
 import os
 import pathlib
 
-from leaps_mj.learning import goal_policy, policies
+from leaps_mj.learning import baselines, goal_policy, policies
 from leaps_mj.world import rooms
+
+#: File name of the controller trained over a folder's sub-policies.
+CONTROLLER = "controller.pt"
 
 
 def load(policy_dir: str | os.PathLike | None, temperature: float = 1.0, seed: int = 0):
@@ -37,3 +40,11 @@ def load(policy_dir: str | os.PathLike | None, temperature: float = 1.0, seed: i
         raise ValueError(f"policy folder {str(policy_dir)!r} holds no sub-policy checkpoint <node>.pt or shared.pt "
                          f"for any of {list(rooms.GRAPH_NODES)}")
     return policies.LearnedSubPolicy(policy_dir, targets, seed=seed, temperature=temperature)
+
+
+def controller_path(policy_dir: str | os.PathLike | None) -> pathlib.Path:
+    """The controller to drive a folder's sub-policies: its own ``controller.pt`` where it has one, else the
+    shipped controller (:data:`leaps_mj.learning.baselines.DEFAULT_CONTROLLER`, trained over the shipped μ(θ))."""
+    if policy_dir is not None and (pathlib.Path(policy_dir) / CONTROLLER).is_file():
+        return pathlib.Path(policy_dir) / CONTROLLER
+    return baselines.DEFAULT_CONTROLLER
