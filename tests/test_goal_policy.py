@@ -357,3 +357,36 @@ def test_reinforce_raises_the_goals_of_episodes_that_succeeded(tiny_dataset, tmp
         dataclasses.replace(config, method="ppo")
     with pytest.raises(ValueError, match="init_from"):
         trainer.warm_start(goal_policy.DEFAULT_DIR)  # the shipped network reads 40x30 maps, this run 24x18
+
+
+def test_mu_s_a_network_reading_the_room_bits_trains_acts_on_them_and_is_found_in_a_folder(
+        tiny_dataset, tmp_path, env):
+    from leaps_mj.learning import policies, policy_folder
+
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=2, episodes=2,
+                                 room_bits=True)
+    aug = tmp_path / "folder" / policy_folder.AUGMENTED
+    train_goal.GoalTrainer(config, aug, progress=False).train()
+    data = np.load(aug / "data" / "round_001.npz")
+    assert data["bits"].shape == (len(data["label"]), rooms.NUM_ROOM_TYPES) and data["bits"].any()
+    mu_s = policy_folder.load_augmented(tmp_path / "folder")
+    assert isinstance(mu_s, goal_policy.GoalSubPolicy) and mu_s.net.config.room_bits
+    ts = env.reset()
+    mu_s.reset(env.episode.target)
+    assert 0 <= mu_s.act(ts) < rooms.NUM_ACTIONS
+    # The bits reach the goal: the same map with other bits scores the cells differently.
+    maps, node = torch.zeros(1, mu_s.net.config.input_channels, mapping.WINDOW, mapping.WINDOW), torch.tensor([0])
+    bits = torch.zeros(1, rooms.NUM_ROOM_TYPES)
+    assert not torch.equal(mu_s.net(maps, node, bits), mu_s.net(maps, node, bits + 1))
+    with pytest.raises(ValueError, match="room-type bits missing"):
+        mu_s.net(maps, node)
+    with pytest.raises(ValueError, match="room-type bits given"):
+        nets.GoalNet(nets.GoalNetConfig(width=W, height=H))(maps[:, :6], node, bits)
+    with pytest.raises(ValueError, match="bits has shape"):
+        mu_s.net(maps, node, bits[:, :3])
+    # A folder without its own μ_s falls back on the shipped one; a bit-blind network is refused as μ_s.
+    assert isinstance(policy_folder.load_augmented(tmp_path), policies.LearnedSubPolicy)
+    blind = tmp_path / "blind" / policy_folder.AUGMENTED
+    train_goal.GoalTrainer(dataclasses.replace(config, rounds=1, room_bits=False), blind, progress=False).train()
+    with pytest.raises(ValueError, match="does not read the room-type bits"):
+        policy_folder.load_augmented(tmp_path / "blind")

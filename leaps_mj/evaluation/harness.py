@@ -27,9 +27,11 @@ Outputs in ``--out``:
 * ``success_vs_plan_length.png``, ``success_vs_metres.png``,
   ``relative_improvement.png``: the paper's Fig. 4-style plots.
 
-Agent ``aug`` (the semantic-augmented policy μ_s) always runs the shipped
-learned μ_s (``leaps_mj.learning.policies.load_augmented()``), whatever
-``--subpolicy`` says; ``controller`` and ``leaps*`` use ``--subpolicy``.
+Agent ``aug`` (the semantic-augmented policy μ_s) runs the μ_s trained with
+the ``--policy-dir`` folder's recipe where the folder has one (``aug/``), else
+the shipped learned μ_s, whatever ``--subpolicy`` says; ``controller`` drives
+the ``--subpolicy`` with the folder's own controller (``controller.pt``) or the
+shipped one (:mod:`leaps_mj.learning.policy_folder`); ``leaps*`` use ``--subpolicy``.
 
 ``--subset quick`` (20 episodes per plan length, 100 on the canonical test
 split: the README's main job) is the fixed subset for a short run; ``--subset smoke`` (2 per plan length) checks the
@@ -234,9 +236,9 @@ def _build_agent(spec: AgentSpec, seed: int):
     subpolicy = _WORKER["subpolicy"]
     if spec.name == "aug":
         if "augmented" not in _WORKER:
-            from leaps_mj.learning import policies
+            from leaps_mj.learning import policy_folder
 
-            _WORKER["augmented"] = policies.load_augmented()
+            _WORKER["augmented"] = policy_folder.load_augmented(config.policy_dir)
         subpolicy = _WORKER["augmented"]
     if subpolicy is not None:
         subpolicy.seed(seed)  # the episode's own sampling stream, whatever ran before

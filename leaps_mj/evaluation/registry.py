@@ -24,7 +24,7 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
       subpolicy: the sub-policy of "pure", "leaps" and "controller" (any
         :class:`leaps_mj.planning.agents.SubPolicy`, e.g. the learned ones; default a
         :class:`leaps_mj.planning.agents.LocalExpertPolicy`), or μ_s for "aug" (required:
-        ``leaps_mj.learning.policies.load_augmented()``).
+        ``leaps_mj.learning.policy_folder.load_augmented(policy_dir)``).
       seed: seed of the agent's (and default sub-policy's) random draws.
       **kwargs: for "leaps": ``model`` (a SemanticModel) or ``prior`` (see
         :func:`leaps_mj.planning.agents.load_model`), ``replan_every``, ``rule``; for "controller":
@@ -60,7 +60,7 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
 
         if subpolicy is None:
             raise ValueError("agent 'aug' needs its semantic-augmented policy μ_s as subpolicy "
-                             "(leaps_mj.learning.policies.load_augmented())")
+                             "(leaps_mj.learning.policy_folder.load_augmented(policy_dir))")
         return baselines.AugmentedPolicyAgent(subpolicy)
     sub = subpolicy if subpolicy is not None else agents.LocalExpertPolicy(env, seed)
     if name == "pure":

@@ -17,8 +17,9 @@ way modular navigation agents do:
   the cells not seen blocked; at the goal the sub-policy faces the nearest
   mapped object of the target and stops where it fills the frame.
 
-It reads the observation only (segmentation, depth, ``pose``, ``collision``)
-and has the sub-policy interface (``reset(target)``, ``act(timestep)``,
+It reads the observation only (segmentation, depth, ``pose``, ``collision``;
+a network trained with ``room_bits``, the semantic-augmented μ_s, also the
+``semantic`` bits) and has the sub-policy interface (``reset(target)``, ``act(timestep)``,
 ``seed``), so LEAPS, the baselines and the hop benchmark drive it as they
 drive :class:`leaps_mj.learning.policies.LearnedSubPolicy`. The checkpoint is
 one ``goal.pt`` serving every graph node, trained by
@@ -116,7 +117,8 @@ class GoalSubPolicy:
             raise ValueError("call reset(target) before act()")
         window = self._driver.observe(timestep.observation)
         if self._driver.needs_goal():
-            logits = self.net(torch.as_tensor(window[None]), torch.tensor([self._driver.node]))
+            bits = torch.as_tensor(timestep.observation["semantic"][None]) if self.net.config.room_bits else None
+            logits = self.net(torch.as_tensor(window[None]), torch.tensor([self._driver.node]), bits)
             self._driver.set_goal(int(logits.argmax()))
         return self._driver.act()
 

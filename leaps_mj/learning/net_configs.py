@@ -174,6 +174,8 @@ class GoalNetConfig:
         and trees for ``outdoor``).
       semantic: Whether its maps mark every room type's see-objects in channels
         of their own (``mapping.SEMANTIC``, after the ``map_channels``).
+      room_bits: Whether it also reads the observation's room-type bits (``rooms.NUM_ROOM_TYPES``
+        values beside the node's one-hot): the semantic-augmented policy μ_s of the paper's baseline.
     """
 
     width: int = 40
@@ -186,6 +188,7 @@ class GoalNetConfig:
     context: bool = False
     cues: bool = False
     semantic: bool = False
+    room_bits: bool = False
 
     @property
     def input_channels(self) -> int:

@@ -465,10 +465,10 @@ class GoalNet(_Net):
     """Scores the cells of the egocentric map as the next goal (the map-goal sub-policy).
 
     3x3 stride-2 convs over the map -> Linear(hidden) -> ReLU -> [+ node
-    one-hot] -> Linear(window ** 2): one logit per map cell, trained with
-    cross-entropy on the cell the geodesic path leads to
-    (:mod:`leaps_mj.learning.train_goal`). One network serves every graph
-    node; the map's ``target`` channel already holds the node's objects.
+    one-hot, + room-type bits with ``room_bits``] -> Linear(window ** 2): one
+    logit per map cell, trained with cross-entropy on the cell the geodesic
+    path leads to (:mod:`leaps_mj.learning.train_goal`). One network serves
+    every graph node; the map's ``target`` channel already holds the node's objects.
     """
 
     def __init__(self, config: GoalNetConfig = GoalNetConfig()):
@@ -481,14 +481,17 @@ class GoalNet(_Net):
         side = config.window // 2 ** len(config.channels)
         self.conv = nn.Sequential(*layers, nn.Flatten(),
                                   _layer_init(nn.Linear(in_channels * side * side, config.hidden)), nn.ReLU())
-        self.out = _layer_init(nn.Linear(config.hidden + config.num_nodes, config.window ** 2), std=0.01)
+        bits = rooms.NUM_ROOM_TYPES if config.room_bits else 0
+        self.out = _layer_init(nn.Linear(config.hidden + config.num_nodes + bits, config.window ** 2), std=0.01)
 
-    def forward(self, egomap: torch.Tensor, node: torch.Tensor) -> torch.Tensor:
+    def forward(self, egomap: torch.Tensor, node: torch.Tensor, bits: torch.Tensor | None = None) -> torch.Tensor:
         """Goal logits (B, window ** 2), row-major over the window, from maps (B, C, window, window)
-        (any numeric dtype; cells are 0/1) and node indices (B,) ints.
+        (any numeric dtype; cells are 0/1), node indices (B,) ints and, with ``room_bits``, the
+        room-type bits (B, NUM_ROOM_TYPES).
 
         Raises:
-          ValueError: for maps or node indices of another shape or range.
+          ValueError: for maps, node indices or bits of another shape or range; for bits given to a
+            network without ``room_bits`` or missing for one with it.
         """
         cfg = self.config
         shape = (cfg.input_channels, cfg.window, cfg.window)
@@ -498,8 +501,16 @@ class GoalNet(_Net):
                                                      < cfg.num_nodes):
             raise ValueError(f"node has shape {tuple(node.shape)} and values {node.tolist()[:8]}; expected "
                              f"({egomap.shape[0]},) indices in [0, {cfg.num_nodes})")
-        features = self.conv(egomap.float())
-        return self.out(torch.cat([features, F.one_hot(node.long(), cfg.num_nodes).float()], dim=1))
+        inputs = [self.conv(egomap.float()), F.one_hot(node.long(), cfg.num_nodes).float()]
+        if cfg.room_bits != (bits is not None):
+            raise ValueError(f"room-type bits {'missing' if bits is None else 'given'}: this network "
+                             f"{'reads' if cfg.room_bits else 'does not read'} them (room_bits={cfg.room_bits})")
+        if bits is not None:
+            if tuple(bits.shape) != (egomap.shape[0], rooms.NUM_ROOM_TYPES):
+                raise ValueError(f"bits has shape {tuple(bits.shape)}; expected ({egomap.shape[0]}, "
+                                 f"{rooms.NUM_ROOM_TYPES})")
+            inputs.append(bits.float())
+        return self.out(torch.cat(inputs, dim=1))
 
 
 _NETS = {

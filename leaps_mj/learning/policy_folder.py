@@ -16,6 +16,8 @@ from leaps_mj.world import rooms
 
 #: File name of the controller trained over a folder's sub-policies.
 CONTROLLER = "controller.pt"
+#: Sub-folder of the semantic-augmented policy μ_s trained with a folder's recipe.
+AUGMENTED = "aug"
 
 
 def load(policy_dir: str | os.PathLike | None, temperature: float = 1.0, seed: int = 0):
@@ -48,3 +50,21 @@ def controller_path(policy_dir: str | os.PathLike | None) -> pathlib.Path:
     if policy_dir is not None and (pathlib.Path(policy_dir) / CONTROLLER).is_file():
         return pathlib.Path(policy_dir) / CONTROLLER
     return baselines.DEFAULT_CONTROLLER
+
+
+def load_augmented(policy_dir: str | os.PathLike | None, seed: int = 0):
+    """The semantic-augmented policy μ_s of the ``aug`` baseline for a folder's sub-policies: the map-goal
+    network with room-type bits in ``<policy_dir>/aug/`` where there is one, else the shipped per-target μ_s
+    (:func:`leaps_mj.learning.policies.load_augmented`).
+
+    Raises:
+      ValueError: if ``<policy_dir>/aug/goal.pt`` is a network that does not read the room-type bits.
+    """
+    folder = pathlib.Path(policy_dir) / AUGMENTED if policy_dir is not None else None
+    if folder is None or not (folder / goal_policy.GOAL).is_file():
+        return policies.load_augmented(seed=seed)
+    augmented = goal_policy.GoalSubPolicy(folder, seed=seed)
+    if not augmented.net.config.room_bits:
+        raise ValueError(f"{folder / goal_policy.GOAL} does not read the room-type bits, so it is no μ_s; "
+                         f"train it with `python -m leaps_mj.train goal --room-bits true`")
+    return augmented

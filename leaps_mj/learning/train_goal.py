@@ -89,6 +89,8 @@ class GoalTrainConfig:
       cues: Whether the maps mark the target's cues (:data:`leaps_mj.environment.mapping.CUES`).
       semantic: Whether the maps mark every room type's see-objects in channels of their own
         (:data:`leaps_mj.environment.mapping.SEMANTIC`).
+      room_bits: Whether the network also reads the observation's room-type bits (the semantic-augmented
+        policy μ_s, ``python -m leaps_mj.evaluate --agent aug``; stored with each sample).
       teacher: Whose path the goal labels follow: ``geodesic``
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
@@ -129,6 +131,7 @@ class GoalTrainConfig:
     context: bool = False
     cues: bool = False
     semantic: bool = False
+    room_bits: bool = False
     teacher: str = "geodesic"
     method: str = "dagger"
     init_from: str = ""
@@ -144,7 +147,7 @@ class GoalTrainConfig:
     def net_config(self) -> nets.GoalNetConfig:
         """The architecture of the network this run trains."""
         return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues,
-                                 semantic=self.semantic)
+                                 semantic=self.semantic, room_bits=self.room_bits)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
@@ -196,8 +199,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
       temperature: The network's goals are sampled from its softmax at this temperature (None: its argmax).
 
     Returns:
-      ``maps`` (N, packed bytes) uint8 bit-packed egocentric maps, ``node``
-      (N,) and ``label`` (N,) ints, ``choice`` (N,) the goal chosen at each
+      ``maps`` (N, packed bytes) uint8 bit-packed egocentric maps, ``bits``
+      (N, NUM_ROOM_TYPES) uint8 room-type bits, ``node`` (N,) and ``label`` (N,) ints, ``choice`` (N,) the goal chosen at each
       step (-1 where none was), ``episode`` (N,) each step's episode index;
       ``success`` (E,) and ``teacher`` (E,) bools: whether each episode
       succeeded and whether the teacher drove it.
@@ -214,7 +217,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                        max_start_distance=config.max_start_distance)
     teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
-    maps, nodes, labels, choices, episode_of, success, driven = [], [], [], [], [], [], []
+    maps, bits, nodes, labels, choices, episode_of, success, driven = [], [], [], [], [], [], [], []
     try:
         for episode in range(episodes):
             ts = env.reset()
@@ -228,6 +231,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                 window = driver.observe(ts.observation)
                 label = teacher.cell(driver.mapper, driver.pose)
                 maps.append(np.packbits(window))
+                bits.append(np.asarray(ts.observation["semantic"], np.uint8))
                 nodes.append(driver.node)
                 labels.append(label)
                 episode_of.append(episode)
@@ -237,7 +241,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                         choice = label
                     else:
                         with torch.no_grad():
-                            logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]))[0]
+                            logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]),
+                                         torch.as_tensor(bits[-1][None]) if config.room_bits else None)[0]
                         if temperature is None:
                             choice = int(logits.argmax())
                         else:
@@ -250,10 +255,16 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             driven.append(by_teacher)
     finally:
         env.close()
-    return {"maps": np.asarray(maps, np.uint8), "node": np.asarray(nodes, np.int64),
+    return {"maps": np.asarray(maps, np.uint8), "bits": np.asarray(bits, np.uint8).reshape(-1, rooms.NUM_ROOM_TYPES),
+            "node": np.asarray(nodes, np.int64),
             "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
             "episode": np.asarray(episode_of, np.int64), "success": np.asarray(success, bool),
             "teacher": np.asarray(driven, bool)}
+
+
+def _bits(config: GoalTrainConfig, samples: dict[str, np.ndarray], idx: np.ndarray) -> torch.Tensor | None:
+    """The room-type bits of samples ``idx`` as the network's input where it reads them (None otherwise)."""
+    return torch.as_tensor(samples["bits"][idx]) if config.room_bits else None
 
 
 def goal_loss(logits: torch.Tensor, labels: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -353,7 +364,7 @@ class GoalTrainer(trainer_lib.Trainer):
     def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Every round's samples so far, this round's (``fresh``) last: earlier rounds are read from
         disk once (after a resume), then kept in memory."""
-        keys = ("maps", "node", "label")
+        keys = ("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
         if self._data is None:
             parts = [np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
             self._data = {k: np.concatenate([p[k] for p in parts]) if parts else fresh[k][:0] for k in keys}
@@ -382,7 +393,7 @@ class GoalTrainer(trainer_lib.Trainer):
         for start in range(0, len(order), c.batch):
             idx = np.sort(order[start:start + c.batch])
             logits = self.model(_unpack(fresh["maps"][idx], self.model.config.input_channels),
-                                torch.as_tensor(fresh["node"][idx]))
+                                torch.as_tensor(fresh["node"][idx]), _bits(c, fresh, idx))
             bc = goal_loss(logits, torch.as_tensor(fresh["label"][idx]), c.label_sigma)
             choice = torch.as_tensor(fresh["choice"][idx])
             chose = choice >= 0
@@ -430,7 +441,7 @@ class GoalTrainer(trainer_lib.Trainer):
                 maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
             if c.rotate:
                 maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
-            logits = self.model(maps, torch.as_tensor(data["node"][idx]))
+            logits = self.model(maps, torch.as_tensor(data["node"][idx]), _bits(c, data, idx))
             loss = goal_loss(logits, labels, c.label_sigma)
             self.optimizer.zero_grad()
             loss.backward()
