@@ -15,7 +15,15 @@ second of wall-clock, and per 1000 samples the seconds spent
   success test (``Task.after_step``), and expert labelling (DAgger).
 
 All of it is measured in the same run, from the trainer's own timers (the
-``*_seconds`` columns of ``progress.csv``). Each preset runs its own method:
+``*_seconds`` columns of ``progress.csv``).
+
+``--goal-rounds R`` (default 3; 0 skips it) also runs R rounds of the map-goal trainer's cpu preset
+(:mod:`leaps_mj.learning.train_goal`: DAgger over an aggregated dataset on disk, several epochs a
+round) in the same run and prints its own split: fresh samples per second of collection (2 worker
+processes rendering, mapping and labelling), samples per second of the learner (each of its
+minibatch passes over the dataset counts a sample once per epoch), and end to end both the fresh
+samples and the trained samples per second of wall-clock. Its learner's share grows with the rounds
+(each round trains over everything gathered so far), so the row says how many rounds it covers. Each preset runs its own method:
 cpu is DAgger (3 replayed updates per iteration), hop is DAgger with one
 network shared by the 9 nodes and auxiliary losses (2 replayed updates),
 paper is A2C (no expert). Each preset runs its own number of environments
@@ -33,7 +41,7 @@ import tempfile
 
 import numpy as np
 
-from leaps_mj.learning import nets, policy_eval, train_policy
+from leaps_mj.learning import nets, policy_eval, train_goal, train_policy
 from leaps_mj.world import dataset
 
 _COLUMNS = (
@@ -71,6 +79,19 @@ def measure(preset: str, iterations: int, warmup: int, num_envs: int | None, dev
     }
 
 
+def measure_goal(rounds: int, dataset: str) -> dict:
+    """Trains ``rounds`` rounds of the map-goal trainer's cpu preset; returns its samples per second."""
+    config = dataclasses.replace(train_goal.PRESETS["cpu"], dataset=dataset, rounds=rounds)
+    with tempfile.TemporaryDirectory(prefix="train_throughput_goal_") as out:
+        train_goal.GoalTrainer(config, out, progress=False).train()
+        log = policy_eval.read_progress(f"{out}/progress.csv")
+    collect, learn = float(np.sum(log["collect_seconds"])), float(np.sum(log["train_seconds"]))
+    fresh, trained = float(np.sum(log["fresh_samples"])), float(config.epochs * np.sum(log["samples"]))
+    return {"rounds": rounds, "fresh": fresh, "collect_sps": fresh / collect, "learner_sps": trained / learn,
+            "fresh_sps": fresh / (collect + learn), "trained_sps": trained / (collect + learn),
+            "learner_share": learn / (collect + learn)}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--presets", nargs="+", default=["cpu", "hop", "paper"], choices=sorted(train_policy.PRESETS))
@@ -82,10 +103,13 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of the learner")
     parser.add_argument("--dataset", default=dataset.CANONICAL)
     parser.add_argument("--target", default="kitchen", help="target of the per-target presets")
+    parser.add_argument("--goal-rounds", type=int, default=3, help="rounds of the map-goal trainer (0: skip it)")
     args = parser.parse_args(argv)
-    if args.iterations < 1 or args.warmup < 0 or (args.num_envs is not None and args.num_envs < 1) or args.threads < 1:
+    if args.iterations < 1 or args.warmup < 0 or (args.num_envs is not None and args.num_envs < 1) or args.threads < 1 \
+            or args.goal_rounds < 0:
         raise ValueError(f"--iterations {args.iterations}, --warmup {args.warmup}, --num-envs {args.num_envs}, "
-                         f"--threads {args.threads}: expected iterations, envs, threads >= 1 and warmup >= 0")
+                         f"--threads {args.threads}, --goal-rounds {args.goal_rounds}: expected iterations, envs, "
+                         f"threads >= 1 and warmup, goal rounds >= 0")
     import torch
 
     torch.set_num_threads(args.threads)
@@ -98,6 +122,13 @@ def main(argv=None) -> int:
     for r in results:
         print(f"{r['preset']:7} {r['method']:10} {r['resolution']:7} {r['params']:9,d} {r['envs']:4d} "
               f"{r['sps']:9.1f} | " + " ".join(f"{r[key]:8.2f}" for key, _ in _COLUMNS))
+    if args.goal_rounds:
+        g = measure_goal(args.goal_rounds, args.dataset)
+        print(f"\nmap-goal trainer, cpu preset, {g['rounds']} rounds ({g['fresh']:,.0f} fresh samples; learner "
+              f"{100 * g['learner_share']:.0f} % of the wall-clock), samples/s:")
+        print(f"{'collection (fresh)':>20} {'learner (trained)':>18} {'end to end, fresh':>18} "
+              f"{'end to end, trained':>20}")
+        print(f"{g['collect_sps']:20.1f} {g['learner_sps']:18.1f} {g['fresh_sps']:18.1f} {g['trained_sps']:20.1f}")
     return 0
 
 
