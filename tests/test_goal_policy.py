@@ -249,15 +249,20 @@ def test_quarter_turns_move_the_goal_with_the_map():
     assert torch.equal(back, maps) and torch.equal(again, labels)
 
 
-def test_the_shipped_map_goal_network_loads_and_acts_at_120x90(tiny_dataset, monkeypatch, tmp_path):
+def test_the_shipped_map_goal_network_and_its_mu_s_load_and_act_at_120x90(tiny_dataset, monkeypatch, tmp_path):
+    from leaps_mj.learning import policy_folder
+
     policy = goal_policy.load_default()
-    assert (policy.width, policy.height) == (40, 30) and policy.metadata["round"] == 12
+    mu_s = policy_folder.load_augmented(goal_policy.DEFAULT_DIR)
+    assert not policy.net.config.room_bits and mu_s.net.config.room_bits
     env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=8)
     try:
-        ts = env.reset()
-        policy.reset(env.episode.target)
-        while not ts.last():
-            ts = env.step(policy.act(ts))
+        for shipped in (policy, mu_s):
+            assert (shipped.width, shipped.height) == (40, 30) and shipped.metadata["round"] == 12
+            ts = env.reset()
+            shipped.reset(env.episode.target)
+            while not ts.last():
+                ts = env.step(shipped.act(ts))
     finally:
         env.close()
     monkeypatch.setattr(goal_policy, "DEFAULT_DIR", tmp_path)
@@ -390,3 +395,9 @@ def test_mu_s_a_network_reading_the_room_bits_trains_acts_on_them_and_is_found_i
     train_goal.GoalTrainer(dataclasses.replace(config, rounds=1, room_bits=False), blind, progress=False).train()
     with pytest.raises(ValueError, match="does not read the room-type bits"):
         policy_folder.load_augmented(tmp_path / "blind")
+
+
+def test_the_shipped_checkpoints_stay_within_20_mb():
+    sizes = {p: p.stat().st_size for p in rooms.DATA_DIR.rglob("*.pt")}
+    assert goal_policy.DEFAULT_DIR / goal_policy.GOAL in sizes
+    assert sum(sizes.values()) <= 20 * 2 ** 20, {str(p): s for p, s in sizes.items()}
