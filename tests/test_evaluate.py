@@ -75,7 +75,7 @@ def test_select_episodes_is_stratified_and_seeded(tiny_dataset):
 def _main(tiny_dataset, out, *extra):
     return evaluate.main(["--agent", "random", "pure", "leaps", "oracle", "--dataset", str(tiny_dataset),
                           "--split", "test", "--horizon", "20", "60", "--out", str(out), "--limit", "4",
-                          "--prior", "reference", "--no-progress", *extra])
+                          "--prior", "reference", "--subpolicy", "local", "--no-progress", *extra])
 
 
 def test_main_writes_csvs_table_plots_and_resumes(tiny_dataset, tmp_path, monkeypatch, capsys):
@@ -136,7 +136,7 @@ def test_main_records_episodes_as_mcap(tiny_dataset, tmp_path, capsys):
 
     out, rec = tmp_path / "eval", tmp_path / "records"
     code = evaluate.main(["--agent", "random", "leaps", "--dataset", str(tiny_dataset), "--split", "test",
-                          "--horizon", "20", "--out", str(out), "--limit", "2", "--no-progress",
+                          "--horizon", "20", "--out", str(out), "--limit", "2", "--no-progress", "--subpolicy", "local",
                           "--record", str(rec), "--record-mode", "all"])
     assert code == 0
     for label in ("random", "leaps"):
@@ -212,3 +212,24 @@ def test_main_runs_leaps_over_a_map_goal_sub_policy_from_policy_dir(tiny_dataset
         assert len(list(csv.DictReader(f))) == 2
     assert evaluate.main(argv + ["--out", str(tmp_path / "hot"), "--temperature", "0.5"]) == 2
     assert "does not sample" in capsys.readouterr().err
+
+
+def test_the_default_sub_policy_is_the_shipped_map_goal_one_and_shipped_folders_go_by_name(tiny_dataset, tmp_path):
+    """Without --subpolicy / --policy-dir evaluation drives the shipped map-goal sub-policy (recorded by name);
+    ``--policy-dir cpu``, the shipped μ(θ), is recorded as no folder, as result folders made before it was named."""
+    from leaps_mj.learning import goal_policy, policies, policy_folder
+
+    argv = ["--agent", "pure", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "5", "--limit", "1",
+            "--no-progress"]
+    assert evaluate.main(argv + ["--out", str(tmp_path / "default")]) == 0
+    saved = json.loads((tmp_path / "default" / "config.json").read_text())
+    assert (saved["subpolicy"], saved["policy_dir"]) == ("learned", policy_folder.DEFAULT)
+    assert evaluate.main(argv + ["--out", str(tmp_path / "mu"), "--policy-dir", "cpu"]) == 0
+    assert "policy_dir" not in json.loads((tmp_path / "mu" / "config.json").read_text())
+    assert policy_folder.resolve("goal_cpu") == goal_policy.DEFAULT_DIR
+    assert policy_folder.resolve("cpu") == policies.DEFAULT_DIR
+    assert policy_folder.resolve(None) is None
+    assert policy_folder.resolve(tmp_path) == tmp_path
+    assert isinstance(policy_folder.load("goal_cpu"), goal_policy.GoalSubPolicy)
+    assert policy_folder.controller_path("goal_cpu") == goal_policy.DEFAULT_DIR / policy_folder.CONTROLLER
+    assert policy_folder.controller_path("cpu") == policy_folder.baselines.DEFAULT_CONTROLLER

@@ -249,12 +249,15 @@ def test_quarter_turns_move_the_goal_with_the_map():
     assert torch.equal(back, maps) and torch.equal(again, labels)
 
 
-def test_the_shipped_map_goal_network_and_its_mu_s_load_and_act_at_120x90(tiny_dataset, monkeypatch, tmp_path):
-    from leaps_mj.learning import policy_folder
+def test_the_shipped_map_goal_network_its_mu_s_and_controller_load_and_act_at_120x90(tiny_dataset, monkeypatch,
+                                                                                       tmp_path):
+    from leaps_mj.learning import baselines, policy_folder
 
     policy = goal_policy.load_default()
     mu_s = policy_folder.load_augmented(goal_policy.DEFAULT_DIR)
     assert not policy.net.config.room_bits and mu_s.net.config.room_bits
+    controller = baselines.ControllerAgent.from_checkpoint(policy, policy_folder.controller_path(goal_policy.DEFAULT_DIR))
+    assert policy_folder.controller_path(goal_policy.DEFAULT_DIR) != baselines.DEFAULT_CONTROLLER
     env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=8)
     try:
         for shipped in (policy, mu_s):
@@ -263,6 +266,11 @@ def test_the_shipped_map_goal_network_and_its_mu_s_load_and_act_at_120x90(tiny_d
             shipped.reset(env.episode.target)
             while not ts.last():
                 ts = env.step(shipped.act(ts))
+        ts = env.reset()
+        controller.reset(env.episode.target)
+        while not ts.last():
+            ts = env.step(controller.step(ts))
+        assert controller.decisions  # it chose a sub-target
     finally:
         env.close()
     monkeypatch.setattr(goal_policy, "DEFAULT_DIR", tmp_path)

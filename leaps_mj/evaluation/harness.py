@@ -135,7 +135,9 @@ class EvalConfig:
       episodes: the fixed episode set (a key of
         :data:`leaps_mj.environment.episodes.EPISODE_SETS`: "plan_length" or "hops").
       policy_dir: with ``subpolicy="learned"``, a folder of sub-policy
-        checkpoints (``<node>.pt``) to run instead of the shipped ones.
+        checkpoints (``<node>.pt``, ``shared.pt`` or ``goal.pt``) or the name of a
+        shipped one (:data:`leaps_mj.learning.policy_folder.SHIPPED`); None: the
+        shipped μ(θ).
       temperature: with ``subpolicy="learned"``, the sampling temperature of
         the sub-policies' actions (1: as trained; below 1 sharper).
     """
@@ -593,6 +595,18 @@ def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: path
     return summary
 
 
+def _policy_dir(subpolicy: str, policy_dir: str | None) -> str | None:
+    """``EvalConfig.policy_dir`` for the command line's choice: the shipped map-goal folder's name by default with
+    learned sub-policies; the shipped μ(θ) (name ``cpu``) as None, as result folders made before it was named
+    record it."""
+    if subpolicy != "learned":
+        return policy_dir
+    from leaps_mj.learning import policy_folder
+
+    policy_dir = policy_folder.DEFAULT if policy_dir is None else policy_dir
+    return None if policy_folder.resolve(policy_dir).resolve() == policy_folder.SHIPPED["cpu"].resolve() else policy_dir
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m leaps_mj.evaluate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -601,8 +615,8 @@ def main(argv=None) -> int:
     p.add_argument("--split", default="test", choices=["valid", "test"])
     p.add_argument("--horizon", nargs="+", type=int, default=[300, 500, 1000])
     p.add_argument("--out", type=pathlib.Path, required=True, help="result folder (resumable)")
-    p.add_argument("--subpolicy", choices=["local", "learned"], default="local",
-                   help="local: the privileged local expert; learned: leaps_mj.learning.policies.load_default()")
+    p.add_argument("--subpolicy", choices=["local", "learned"], default="learned",
+                   help="learned (default): the sub-policies of --policy-dir; local: the privileged local expert")
     p.add_argument("--prior", default=None,
                    help="LEAPS prior: a shipped name (cpu, cpu_learned), 'reference', or a JSON path (default: "
                         f"by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
@@ -611,7 +625,8 @@ def main(argv=None) -> int:
                    help="sampling temperature of the learned sub-policies' actions (1: as trained)")
     p.add_argument("--policy-dir", default=None,
                    help="with --subpolicy learned: a folder of sub-policy checkpoints (<node>.pt, shared.pt, or a "
-                        "map-goal network goal.pt) instead of the shipped ones")
+                        "map-goal network goal.pt), or a shipped one by name: goal_cpu (the map-goal sub-policy, "
+                        "the default) or cpu (the per-target CNN+LSTM networks μ(θ))")
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
                    help=f"episodes per plan length: {SUBSETS}")
     p.add_argument("--episodes-per-length", type=int, default=None, help="overrides --subset")
@@ -627,6 +642,7 @@ def main(argv=None) -> int:
     if horizons[0] < 1:
         p.error(f"--horizon {args.horizon}: expected positive integers")
     where = backends.from_arguments(p, args)
+    args.policy_dir = _policy_dir(args.subpolicy, args.policy_dir)
     args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
