@@ -256,8 +256,9 @@ def test_the_shipped_map_goal_network_its_mu_s_and_controller_load_and_act_at_12
     policy = goal_policy.load_default()
     mu_s = policy_folder.load_augmented(goal_policy.DEFAULT_DIR)
     assert not policy.net.config.room_bits and mu_s.net.config.room_bits
-    controller = baselines.ControllerAgent.from_checkpoint(policy, policy_folder.controller_path(goal_policy.DEFAULT_DIR))
-    assert policy_folder.controller_path(goal_policy.DEFAULT_DIR) != baselines.DEFAULT_CONTROLLER
+    path = policy_folder.controller_path(goal_policy.DEFAULT_DIR)
+    assert path != baselines.DEFAULT_CONTROLLER
+    controller = baselines.ControllerAgent.from_checkpoint(policy, path)
     env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=8)
     try:
         for shipped in (policy, mu_s):
