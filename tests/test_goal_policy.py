@@ -93,7 +93,7 @@ def env(tiny_dataset):
     e.close()
 
 
-@pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable"])
+@pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable", "oracle-map-potential"])
 def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env, name):
     agent = registry.make_agent(name, env, seed=0)
     agent.width, agent.height = W, H
@@ -410,3 +410,82 @@ def test_the_shipped_checkpoints_stay_within_20_mb():
     sizes = {p: p.stat().st_size for p in rooms.DATA_DIR.rglob("*.pt")}
     assert goal_policy.DEFAULT_DIR / goal_policy.GOAL in sizes
     assert sum(sizes.values()) <= 20 * 2 ** 20, {str(p): s for p, s in sizes.items()}
+
+
+def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(env):
+    """The potential labels: int8 quarter metres in range, high in walls; the decoder's walk down them
+    ends near the teacher's goal (both lie about 3 m down the way to the target)."""
+    teacher = goal_teacher.TeacherGoals(env)
+    agent = registry.make_agent("oracle-map", env, seed=0)
+    agent.width, agent.height = W, H
+    low, high = (round(v / mapping.CELL) for v in goal_teacher.POTENTIAL_RANGE)
+    near = checked = 0
+    for _ in range(3):
+        ts = env.reset()
+        agent.reset(env.episode.target)
+        while not ts.last():
+            action = agent.step(ts)
+            cell, potential = teacher.labels(agent.driver.mapper, agent.driver.pose, potential=True)
+            assert cell == teacher.cell(agent.driver.mapper, agent.driver.pose)
+            assert potential.shape == (mapping.WINDOW, mapping.WINDOW) and potential.dtype == np.int8
+            assert low <= potential.min() and potential.max() <= high and (potential == high).any()
+            row, col = divmod(goal_teacher.potential_goal(potential), mapping.WINDOW)
+            goal_row, goal_col = divmod(cell, mapping.WINDOW)
+            near += math.hypot(row - goal_row, col - goal_col) <= 6
+            checked += 1
+            ts = env.step(action)
+    assert near >= 0.8 * checked
+    assert teacher.labels(agent.driver.mapper, agent.driver.pose, potential=False)[1] is None
+
+
+def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
+    config = nets.GoalNetConfig(width=W, height=H, potential=True)
+    net = nets.GoalNet(config)
+    maps = torch.zeros(2, len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
+    logits, potential = net.heads(maps, torch.tensor([0, 3]))
+    assert logits.shape == potential.shape == (2, mapping.WINDOW ** 2)
+    torch.testing.assert_close(net(maps, torch.tensor([0, 3])), logits)
+    assert nets.GoalNet(nets.GoalNetConfig(width=W, height=H)).heads(maps, torch.tensor([0, 3]))[1] is None
+    with pytest.raises(ValueError, match="potential must be a bool"):
+        nets.GoalNetConfig(potential=1)
+    # A potential falling towards the row ahead and the left: the goal is DESCENT diagonal steps up-left,
+    # wherever the goal logits point.
+    rows, cols = np.divmod(np.arange(mapping.WINDOW ** 2), mapping.WINDOW)
+    with torch.no_grad():
+        net.potential.weight.zero_()
+        net.potential.bias.copy_(torch.as_tensor(rows + cols, dtype=torch.float32))
+        net.out.weight.zero_()
+        net.out.bias.zero_()
+        net.out.bias[0] = 10.0
+    driver = map_navigation.GoalDriver("kitchen", W, H)
+    window = _empty_step(driver, np.zeros(3))
+    centre = mapping.WINDOW // 2 - goal_teacher.DESCENT
+    assert goal_policy.choose_goal(net, driver, window) == centre * mapping.WINDOW + centre
+    plain = nets.GoalNet(nets.GoalNetConfig(width=W, height=H))
+    with torch.no_grad():
+        plain.out.bias[7] = 10.0
+    assert goal_policy.choose_goal(plain, driver, window) == 7
+
+
+def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), potential=True, mirror=True,
+                                 rotate=True)
+    trainer = train_goal.GoalTrainer(config, tmp_path, progress=False)
+    trainer.train()
+    data = np.load(tmp_path / "data" / "round_001.npz")
+    assert data["potential"].shape == (len(data["label"]), mapping.WINDOW, mapping.WINDOW)
+    with open(tmp_path / "progress.csv") as f:
+        rows = list(train_goal.csv.DictReader(f))
+    assert all(float(r["potential_loss"]) > 0 for r in rows)
+    net, _ = goal_policy.load_goal_net(tmp_path / goal_policy.GOAL)
+    assert net.config.potential and goal_policy.GoalSubPolicy(tmp_path).net.config.potential
+    # The potential rides as the map's last channel through the symmetries: a marked cell moves with the goal.
+    potential = torch.zeros(1, 1, mapping.WINDOW, mapping.WINDOW)
+    potential[0, 0, 2, 5] = -8.0
+    label = torch.tensor([2 * mapping.WINDOW + 5])
+    turned, moved = train_goal.rotate(*train_goal.mirror(potential, label, torch.tensor([True])), torch.tensor([1]))
+    assert turned.flatten()[moved].item() == -8.0
+    with pytest.raises(ValueError, match="potential True with method 'reinforce'"):
+        dataclasses.replace(config, method="reinforce")
+    with pytest.raises(ValueError, match="potential_coef -1"):
+        dataclasses.replace(config, potential_coef=-1.0)

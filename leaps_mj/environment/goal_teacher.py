@@ -23,6 +23,30 @@ from leaps_mj.world import rooms
 TEACHER_LOOKAHEAD = 3.0
 #: Metres by which the teacher's goal zone is shrunk from its border (see :class:`TeacherGoals`).
 TEACHER_INSET = 0.5
+#: Range (metres) the potential labels are clipped to (:meth:`TeacherGoals.labels`): no window cell
+#: is more than 6 m nearer the target than the agent; 8 m farther is as bad as a wall.
+POTENTIAL_RANGE = (-6.0, 8.0)
+#: Window cells the walk down a potential takes to its goal (:func:`potential_goal`): as far as the
+#: teacher's goals lie down the path.
+DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
+#: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
+_SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3) for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
+
+
+def potential_goal(potential: np.ndarray) -> int:
+    """The goal a potential over the egocentric window leads to, as a row-major window cell.
+
+    The cell reached by :data:`DESCENT` steps from the agent's cell, each to the lowest of the
+    8 neighbours while one is lower (:func:`leaps_mj.environment.expert.descend`). On the teacher's
+    potential (:meth:`TeacherGoals.labels`) this is the way down the shortest path; on a network's
+    prediction, the way towards where the target most likely lies.
+
+    Args:
+      potential: (WINDOW, WINDOW) or (WINDOW ** 2,) values, row-major over the window.
+    """
+    field = np.asarray(potential, np.float64).reshape(mapping.WINDOW, mapping.WINDOW)
+    row, col = expert_lib.descend(field, mapping.WINDOW // 2, mapping.WINDOW // 2, DESCENT)
+    return row * mapping.WINDOW + col
 
 
 class TeacherGoals:
@@ -47,6 +71,7 @@ class TeacherGoals:
         self.env = env
         self.expert = self.expert_class(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
         self._fields: dict[tuple[str, str, tuple[int, ...]], tuple[np.ndarray, np.ndarray]] = {}
+        self._plain: tuple[np.ndarray, np.ndarray] | None = None  # the last steering field and its zone's plain field
 
     def _field(self, target: str, subset: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
         """Steering field to the (shrunk) zone of ``target``, whose rooms the expert's ``field`` chooses
@@ -73,7 +98,43 @@ class TeacherGoals:
 
         Call it every step: a teacher with a memory (:class:`ObservableTeacherGoals`) updates it here.
         """
-        return self.goal_cell(*self.steering(), mapper, pose)
+        return self.labels(mapper, pose, potential=False)[0]
+
+    def labels(self, mapper: mapping.EgoMapper, pose, potential: bool) -> tuple[int, np.ndarray | None]:
+        """The goal cell of :meth:`cell` and, with ``potential``, the window's potential labels.
+
+        The potential of a window cell is how many metres farther the steering field's zone lies
+        from it than from the agent, on the house's grid (its nearest free part), clipped to
+        :data:`POTENTIAL_RANGE` (cells with no free part — walls, furniture, outside the house — at
+        its top), in :data:`leaps_mj.environment.mapping.CELL` units: (WINDOW, WINDOW) int8, oriented
+        as the egocentric map. Descending it from the agent's cell follows the shortest path
+        (:func:`potential_goal`). Unlike the goal cell, which is
+        one choice a learner that has not seen the way cannot always read off its map, these labels
+        score every cell, so a network regressing them learns how far the target is likely to be
+        through each part of the map (the potential functions of PONI, Ramakrishnan et al., 2022).
+        """
+        field, nearest = self.steering()
+        cell = self.goal_cell(field, nearest, mapper, pose)
+        if not potential:
+            return cell, None
+        grid = self.env.task.house_model.grid
+        if self._plain is None or self._plain[0] is not field:
+            # The wide-clearance field leaves a door a corridor a window cell's centre can miss:
+            # the potential is measured on the house's own grid, to the same zone.
+            self._plain = (field, grid.distance_from(field == 0))
+        plain = self._plain[1]
+        x, y = mapper.window_world(pose)
+        metres = np.full(x.shape, np.inf)
+        for dx, dy in _SUBCELLS:  # a window cell is as near as the nearest of its parts
+            i = np.floor((x + dx - grid.origin[0]) / grid.cell).astype(np.int64)
+            j = np.floor((y + dy - grid.origin[1]) / grid.cell).astype(np.int64)
+            inside = (i >= 0) & (i < plain.shape[0]) & (j >= 0) & (j < plain.shape[1])
+            metres[inside] = np.minimum(metres[inside], plain[i[inside], j[inside]])
+        a, b = grid.to_cell(pose[:2])
+        here = plain[a, b] if np.isfinite(plain[a, b]) else metres[np.isfinite(metres)].min(initial=0.0)
+        low, high = POTENTIAL_RANGE
+        relative = np.clip(np.nan_to_num(metres - here, posinf=high), low, high)
+        return cell, np.round(relative / mapping.CELL).astype(np.int8)
 
     def goal_cell(self, field: np.ndarray, nearest: np.ndarray, mapper: mapping.EgoMapper, pose) -> int:
         """The window cell of the point :data:`TEACHER_LOOKAHEAD` metres down a steering field from ``pose``."""

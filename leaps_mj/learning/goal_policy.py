@@ -33,7 +33,7 @@ import pathlib
 
 import torch
 
-from leaps_mj.environment import map_navigation, mapping
+from leaps_mj.environment import goal_teacher, map_navigation, mapping
 from leaps_mj.learning import nets
 from leaps_mj.world import rooms
 
@@ -43,6 +43,27 @@ GOAL = "goal.pt"
 DEFAULT_DIR = rooms.DATA_DIR / "policies" / "goal_cpu"
 #: The command that trains it (session 8; docs/training.md).
 TRAIN_COMMAND = (f"python -m leaps_mj.train goal --preset cpu && cp runs/goal/{GOAL} {DEFAULT_DIR}/")
+
+
+@torch.no_grad()
+def choose_goal(net: nets.GoalNet, driver: map_navigation.GoalDriver, window, bits=None) -> int:
+    """The network's goal for the driver's current map, as a row-major window cell.
+
+    Without a potential head, the cell of the highest goal logit. With one, the end of the walk down
+    its predicted potential (:func:`leaps_mj.environment.goal_teacher.potential_goal`): the way
+    towards where the target most likely lies, as the teacher's goal is the way down the true one.
+
+    Args:
+      net: The map-goal network.
+      driver: The run's driver, after :meth:`~leaps_mj.environment.map_navigation.GoalDriver.observe`.
+      window: The map ``observe`` returned.
+      bits: The observation's room-type bits, for a network that reads them (None otherwise).
+    """
+    bits = torch.as_tensor(bits[None]) if bits is not None else None
+    logits, potential = net.heads(torch.as_tensor(window[None]), torch.tensor([driver.node]), bits)
+    if potential is None:
+        return int(logits.argmax())
+    return goal_teacher.potential_goal(potential[0].numpy())
 
 
 def load_goal_net(path: str | os.PathLike, width: int | None = None,
@@ -117,9 +138,8 @@ class GoalSubPolicy:
             raise ValueError("call reset(target) before act()")
         window = self._driver.observe(timestep.observation)
         if self._driver.needs_goal():
-            bits = torch.as_tensor(timestep.observation["semantic"][None]) if self.net.config.room_bits else None
-            logits = self.net(torch.as_tensor(window[None]), torch.tensor([self._driver.node]), bits)
-            self._driver.set_goal(int(logits.argmax()))
+            bits = timestep.observation["semantic"] if self.net.config.room_bits else None
+            self._driver.set_goal(choose_goal(self.net, self._driver, window, bits))
         return self._driver.act()
 
 

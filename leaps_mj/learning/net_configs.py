@@ -176,6 +176,10 @@ class GoalNetConfig:
         of their own (``mapping.SEMANTIC``, after the ``map_channels``).
       room_bits: Whether it also reads the observation's room-type bits (``rooms.NUM_ROOM_TYPES``
         values beside the node's one-hot): the semantic-augmented policy μ_s of the paper's baseline.
+      potential: Whether it also predicts, for every cell of the window, how much farther (geodesic
+        metres) the target lies from that cell than from the agent: a dense map of where the target
+        is likely to be, trained by regression on the house's plan (session 14, docs/training.md). The
+        sub-policy then picks goals from it rather than from the goal logits.
     """
 
     width: int = 40
@@ -189,6 +193,7 @@ class GoalNetConfig:
     cues: bool = False
     semantic: bool = False
     room_bits: bool = False
+    potential: bool = False
 
     @property
     def input_channels(self) -> int:
@@ -202,7 +207,7 @@ class GoalNetConfig:
         _check_positive_tuple("channels", self.channels)
         for name in ("width", "height", "hidden", "map_channels", "window", "num_nodes"):
             _check_positive(name, getattr(self, name))
-        for name in ("context", "cues", "semantic"):
+        for name in ("context", "cues", "semantic", "room_bits", "potential"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.window % 2 ** len(self.channels):

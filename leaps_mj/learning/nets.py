@@ -467,8 +467,10 @@ class GoalNet(_Net):
     3x3 stride-2 convs over the map -> Linear(hidden) -> ReLU -> [+ node
     one-hot, + room-type bits with ``room_bits``] -> Linear(window ** 2): one
     logit per map cell, trained with cross-entropy on the cell the geodesic
-    path leads to (:mod:`leaps_mj.learning.train_goal`). One network serves
-    every graph node; the map's ``target`` channel already holds the node's objects.
+    path leads to (:mod:`leaps_mj.learning.train_goal`). With ``potential`` a
+    second Linear(window ** 2) on the same features predicts each cell's
+    geodesic metres to the target relative to the agent's (:meth:`heads`). One
+    network serves every graph node; the map's ``target`` channel already holds the node's objects.
     """
 
     def __init__(self, config: GoalNetConfig = GoalNetConfig()):
@@ -482,12 +484,24 @@ class GoalNet(_Net):
         self.conv = nn.Sequential(*layers, nn.Flatten(),
                                   _layer_init(nn.Linear(in_channels * side * side, config.hidden)), nn.ReLU())
         bits = rooms.NUM_ROOM_TYPES if config.room_bits else 0
-        self.out = _layer_init(nn.Linear(config.hidden + config.num_nodes + bits, config.window ** 2), std=0.01)
+        features = config.hidden + config.num_nodes + bits
+        self.out = _layer_init(nn.Linear(features, config.window ** 2), std=0.01)
+        self.potential = _layer_init(nn.Linear(features, config.window ** 2), std=0.01) if config.potential else None
 
     def forward(self, egomap: torch.Tensor, node: torch.Tensor, bits: torch.Tensor | None = None) -> torch.Tensor:
         """Goal logits (B, window ** 2), row-major over the window, from maps (B, C, window, window)
         (any numeric dtype; cells are 0/1), node indices (B,) ints and, with ``room_bits``, the
         room-type bits (B, NUM_ROOM_TYPES).
+
+        Raises:
+          ValueError: as :meth:`heads`.
+        """
+        return self.heads(egomap, node, bits)[0]
+
+    def heads(self, egomap: torch.Tensor, node: torch.Tensor,
+              bits: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The goal logits (B, window ** 2) and, with ``potential``, each cell's predicted geodesic metres
+        to the target minus the agent's (B, window ** 2; None without), from the inputs of :meth:`forward`.
 
         Raises:
           ValueError: for maps, node indices or bits of another shape or range; for bits given to a
@@ -510,7 +524,8 @@ class GoalNet(_Net):
                 raise ValueError(f"bits has shape {tuple(bits.shape)}; expected ({egomap.shape[0]}, "
                                  f"{rooms.NUM_ROOM_TYPES})")
             inputs.append(bits.float())
-        return self.out(torch.cat(inputs, dim=1))
+        features = torch.cat(inputs, dim=1)
+        return self.out(features), self.potential(features) if self.potential is not None else None
 
 
 _NETS = {

@@ -91,6 +91,11 @@ class GoalTrainConfig:
         (:data:`leaps_mj.environment.mapping.SEMANTIC`).
       room_bits: Whether the network also reads the observation's room-type bits (the semantic-augmented
         policy μ_s, ``python -m leaps_mj.evaluate --agent aug``; stored with each sample).
+      potential: Whether the network also has the potential head (``nets.GoalNetConfig.potential``),
+        trained by regression on the teacher's potential labels
+        (:meth:`leaps_mj.environment.goal_teacher.TeacherGoals.labels`, stored with each sample), and
+        picks its goals from it (:func:`leaps_mj.learning.goal_policy.choose_goal`) when it drives.
+      potential_coef: Weight of the potential's smooth-L1 loss (metres) beside the goal cross-entropy.
       teacher: Whose path the goal labels follow: ``geodesic``
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
@@ -132,6 +137,8 @@ class GoalTrainConfig:
     cues: bool = False
     semantic: bool = False
     room_bits: bool = False
+    potential: bool = False
+    potential_coef: float = 1.0
     teacher: str = "geodesic"
     method: str = "dagger"
     init_from: str = ""
@@ -147,7 +154,7 @@ class GoalTrainConfig:
     def net_config(self) -> nets.GoalNetConfig:
         """The architecture of the network this run trains."""
         return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues,
-                                 semantic=self.semantic, room_bits=self.room_bits)
+                                 semantic=self.semantic, room_bits=self.room_bits, potential=self.potential)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
@@ -167,8 +174,12 @@ class GoalTrainConfig:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
             raise ValueError(f"label_sigma {self.label_sigma!r}: expected a number >= 0")
-        if not self.bc_coef >= 0:
-            raise ValueError(f"bc_coef {self.bc_coef!r}: expected a number >= 0")
+        for name in ("bc_coef", "potential_coef"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
+        if self.potential and self.method == "reinforce":
+            raise ValueError("potential True with method 'reinforce': policy-gradient fine-tuning trains the goal "
+                             "logits only; expected potential False")
         for name in ("lr", "max_start_distance", "temperature"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
@@ -201,7 +212,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     Returns:
       ``maps`` (N, packed bytes) uint8 bit-packed egocentric maps, ``bits``
       (N, NUM_ROOM_TYPES) uint8 room-type bits, ``node`` (N,) and ``label`` (N,) ints, ``choice`` (N,) the goal chosen at each
-      step (-1 where none was), ``episode`` (N,) each step's episode index;
+      step (-1 where none was), ``episode`` (N,) each step's episode index; with ``config.potential``,
+      ``potential`` (N, WINDOW, WINDOW) int8 the potential labels;
       ``success`` (E,) and ``teacher`` (E,) bools: whether each episode
       succeeded and whether the teacher drove it.
     """
@@ -217,7 +229,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                        max_start_distance=config.max_start_distance)
     teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
-    maps, bits, nodes, labels, choices, episode_of, success, driven = [], [], [], [], [], [], [], []
+    maps, bits, nodes, labels, potentials, choices, episode_of, success, driven = [], [], [], [], [], [], [], [], []
     try:
         for episode in range(episodes):
             ts = env.reset()
@@ -229,7 +241,9 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             by_teacher = net is None or rng.random() < beta
             while not ts.last():
                 window = driver.observe(ts.observation)
-                label = teacher.cell(driver.mapper, driver.pose)
+                label, potential = teacher.labels(driver.mapper, driver.pose, config.potential)
+                if config.potential:
+                    potentials.append(potential)
                 maps.append(np.packbits(window))
                 bits.append(np.asarray(ts.observation["semantic"], np.uint8))
                 nodes.append(driver.node)
@@ -239,15 +253,14 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                 if driver.needs_goal():
                     if by_teacher:
                         choice = label
+                    elif temperature is None:
+                        choice = goal_policy.choose_goal(net, driver, window, bits[-1] if config.room_bits else None)
                     else:
                         with torch.no_grad():
                             logits = net(torch.as_tensor(window[None]), torch.tensor([driver.node]),
                                          torch.as_tensor(bits[-1][None]) if config.room_bits else None)[0]
-                        if temperature is None:
-                            choice = int(logits.argmax())
-                        else:
-                            p = torch.softmax(logits.double() / temperature, 0).numpy()
-                            choice = int(rng.choice(len(p), p=p / p.sum()))
+                        p = torch.softmax(logits.double() / temperature, 0).numpy()
+                        choice = int(rng.choice(len(p), p=p / p.sum()))
                     driver.set_goal(choice)
                 choices.append(choice)
                 ts = env.step(driver.act())
@@ -255,11 +268,14 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             driven.append(by_teacher)
     finally:
         env.close()
-    return {"maps": np.asarray(maps, np.uint8), "bits": np.asarray(bits, np.uint8).reshape(-1, rooms.NUM_ROOM_TYPES),
-            "node": np.asarray(nodes, np.int64),
-            "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
-            "episode": np.asarray(episode_of, np.int64), "success": np.asarray(success, bool),
-            "teacher": np.asarray(driven, bool)}
+    samples = {"maps": np.asarray(maps, np.uint8), "bits": np.asarray(bits, np.uint8).reshape(-1, rooms.NUM_ROOM_TYPES),
+               "node": np.asarray(nodes, np.int64),
+               "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
+               "episode": np.asarray(episode_of, np.int64), "success": np.asarray(success, bool),
+               "teacher": np.asarray(driven, bool)}
+    if config.potential:
+        samples["potential"] = np.asarray(potentials, np.int8).reshape(-1, mapping.WINDOW, mapping.WINDOW)
+    return samples
 
 
 def _bits(config: GoalTrainConfig, samples: dict[str, np.ndarray], idx: np.ndarray) -> torch.Tensor | None:
@@ -313,7 +329,7 @@ class GoalTrainer(trainer_lib.Trainer):
     """DAgger in rounds for the map-goal network (one iteration = one round)."""
 
     unit = "round"
-    loss_keys = frozenset({"loss", "pg_loss", "accuracy"})
+    loss_keys = frozenset({"loss", "pg_loss", "potential_loss", "accuracy"})
     growable = frozenset({"rounds"})  # nothing is scheduled over the rounds: a finished run can go on
 
     def __init__(self, config: GoalTrainConfig, out: str | os.PathLike, progress: bool = True):
@@ -364,7 +380,8 @@ class GoalTrainer(trainer_lib.Trainer):
     def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Every round's samples so far, this round's (``fresh``) last: earlier rounds are read from
         disk once (after a resume), then kept in memory."""
-        keys = ("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
+        keys = (("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
+                + (("potential",) if self.config.potential else ()))
         if self._data is None:
             parts = [np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
             self._data = {k: np.concatenate([p[k] for p in parts]) if parts else fresh[k][:0] for k in keys}
@@ -410,7 +427,7 @@ class GoalTrainer(trainer_lib.Trainer):
         self.model.eval()
         return {"samples": len(fresh["label"]), "fresh_samples": len(fresh["label"]),
                 "teacher_success": float("nan"), "learner_success": float(won.mean()),
-                "loss": float(np.mean(bc_losses)), "pg_loss": float(np.mean(pg_losses)),
+                "loss": float(np.mean(bc_losses)), "pg_loss": float(np.mean(pg_losses)), "potential_loss": float("nan"),
                 "accuracy": float("nan"), "collect_seconds": collect_seconds,
                 "train_seconds": time.perf_counter() - t0 - collect_seconds}
 
@@ -427,7 +444,7 @@ class GoalTrainer(trainer_lib.Trainer):
         data = self._dataset(fresh)
         rng = np.random.default_rng(c.seed + self.iteration)
         self.model.train()
-        losses, correct, seen = [], 0, 0
+        losses, potential_losses, correct, seen = [], [], 0, 0
         batches = [start for _ in range(c.epochs) for start in range(0, len(data["label"]), c.batch)]
         if c.max_updates:
             batches = batches[:c.max_updates]
@@ -435,14 +452,22 @@ class GoalTrainer(trainer_lib.Trainer):
             if start == 0:
                 order = rng.permutation(len(data["label"]))
             idx = np.sort(order[start:start + c.batch])
-            maps = _unpack(data["maps"][idx], self.model.config.input_channels)
+            channels = self.model.config.input_channels
+            maps = _unpack(data["maps"][idx], channels)
+            if c.potential:  # turned with the map: its last channel
+                maps = torch.cat([maps.float(), torch.as_tensor(data["potential"][idx], dtype=torch.float32)[:, None]], 1)
             labels = torch.as_tensor(data["label"][idx])
             if c.mirror:
                 maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
             if c.rotate:
                 maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
-            logits = self.model(maps, torch.as_tensor(data["node"][idx]), _bits(c, data, idx))
+            logits, potential = self.model.heads(maps[:, :channels], torch.as_tensor(data["node"][idx]),
+                                                 _bits(c, data, idx))
             loss = goal_loss(logits, labels, c.label_sigma)
+            if c.potential:
+                potential_loss = F.smooth_l1_loss(potential, maps[:, channels].flatten(1) * mapping.CELL)
+                loss = loss + c.potential_coef * potential_loss
+                potential_losses.append(potential_loss.item())
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
@@ -455,6 +480,8 @@ class GoalTrainer(trainer_lib.Trainer):
                 "teacher_success": float(fresh["success"][~learner].mean()) if (~learner).any() else float("nan"),
                 "learner_success": float(fresh["success"][learner].mean()) if learner.any() else float("nan"),
                 "loss": float(np.mean(losses[-max(1, len(losses) // c.epochs):])), "accuracy": correct / seen,
+                "potential_loss": (float(np.mean(potential_losses[-max(1, len(potential_losses) // c.epochs):]))
+                                   if potential_losses else float("nan")),
                 "collect_seconds": collect_seconds, "train_seconds": time.perf_counter() - t0 - collect_seconds}
 
     def postfix(self, row: dict) -> dict[str, str]:

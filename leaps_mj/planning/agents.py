@@ -273,6 +273,18 @@ class ObservableMapOracleAgent(MapOracleAgent):
     teacher_class = goal_teacher.ObservableTeacherGoals
 
 
+class PotentialMapOracleAgent(MapOracleAgent):
+    """The map-goal walk with goals read off the teacher's potential
+    (:func:`leaps_mj.environment.goal_teacher.potential_goal` on
+    :meth:`leaps_mj.environment.goal_teacher.TeacherGoals.labels`): the ceiling of a network with a
+    potential head, which picks its goals the same way from its prediction."""
+
+    name = "oracle-map-potential"
+
+    def goal(self) -> int:
+        return goal_teacher.potential_goal(self.teacher.labels(self.driver.mapper, self.driver.pose, potential=True)[1])
+
+
 #: Turns of :class:`FrontierAgent`'s first look around (30° each: a full circle).
 SCAN_TURNS = 12
 
