@@ -439,7 +439,7 @@ def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(en
 
 
 def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
-    config = nets.GoalNetConfig(width=W, height=H, potential=True)
+    config = nets.GoalNetConfig(width=W, height=H, potential=True, goals="potential")
     net = nets.GoalNet(config)
     maps = torch.zeros(2, len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)
     logits, potential = net.heads(maps, torch.tensor([0, 3]))
@@ -448,6 +448,17 @@ def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
     assert nets.GoalNet(nets.GoalNetConfig(width=W, height=H)).heads(maps, torch.tensor([0, 3]))[1] is None
     with pytest.raises(ValueError, match="potential must be a bool"):
         nets.GoalNetConfig(potential=1)
+    with pytest.raises(ValueError, match="expected potential True"):
+        nets.GoalNetConfig(goals="potential")
+    with pytest.raises(ValueError, match="goals 'map'"):
+        nets.GoalNetConfig(potential=True, goals="map")
+    conv = nets.GoalNet(dataclasses.replace(config, decoder="conv", context=True, semantic=True, room_bits=True))
+    maps2 = torch.zeros(2, conv.config.input_channels, mapping.WINDOW, mapping.WINDOW)
+    assert conv.heads(maps2, torch.tensor([0, 3]), torch.zeros(2, rooms.NUM_ROOM_TYPES))[1].shape == (2, mapping.WINDOW ** 2)
+    with pytest.raises(ValueError, match="decoder 'conv' decodes the potential head"):
+        nets.GoalNetConfig(decoder="conv")
+    with pytest.raises(ValueError, match="decoder 'unet'"):
+        nets.GoalNetConfig(potential=True, decoder="unet")
     # A potential falling towards the row ahead and the left: the goal is DESCENT diagonal steps up-left,
     # wherever the goal logits point.
     rows, cols = np.divmod(np.arange(mapping.WINDOW ** 2), mapping.WINDOW)
@@ -461,10 +472,11 @@ def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
     window = _empty_step(driver, np.zeros(3))
     centre = mapping.WINDOW // 2 - goal_teacher.DESCENT
     assert goal_policy.choose_goal(net, driver, window) == centre * mapping.WINDOW + centre
-    plain = nets.GoalNet(nets.GoalNetConfig(width=W, height=H))
-    with torch.no_grad():
-        plain.out.bias[7] = 10.0
-    assert goal_policy.choose_goal(plain, driver, window) == 7
+    for config in (nets.GoalNetConfig(width=W, height=H), dataclasses.replace(config, goals="logits")):
+        other = nets.GoalNet(config)  # goals from the logits: the potential head, if any, only trains
+        with torch.no_grad():
+            other.out.bias[7] = 10.0
+        assert goal_policy.choose_goal(other, driver, window) == 7
 
 
 def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, tmp_path):

@@ -49,8 +49,8 @@ TRAIN_COMMAND = (f"python -m leaps_mj.train goal --preset cpu && cp runs/goal/{G
 def choose_goal(net: nets.GoalNet, driver: map_navigation.GoalDriver, window, bits=None) -> int:
     """The network's goal for the driver's current map, as a row-major window cell.
 
-    Without a potential head, the cell of the highest goal logit. With one, the end of the walk down
-    its predicted potential (:func:`leaps_mj.environment.goal_teacher.potential_goal`): the way
+    With ``goals`` ``logits`` (``nets.GoalNetConfig``), the cell of the highest goal logit; with
+    ``potential``, the end of the walk down its predicted potential (:func:`leaps_mj.environment.goal_teacher.potential_goal`): the way
     towards where the target most likely lies, as the teacher's goal is the way down the true one.
 
     Args:
@@ -61,7 +61,7 @@ def choose_goal(net: nets.GoalNet, driver: map_navigation.GoalDriver, window, bi
     """
     bits = torch.as_tensor(bits[None]) if bits is not None else None
     logits, potential = net.heads(torch.as_tensor(window[None]), torch.tensor([driver.node]), bits)
-    if potential is None:
+    if net.config.goals == "logits":
         return int(logits.argmax())
     return goal_teacher.potential_goal(potential[0].numpy())
 

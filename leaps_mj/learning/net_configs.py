@@ -178,8 +178,13 @@ class GoalNetConfig:
         values beside the node's one-hot): the semantic-augmented policy μ_s of the paper's baseline.
       potential: Whether it also predicts, for every cell of the window, how much farther (geodesic
         metres) the target lies from that cell than from the agent: a dense map of where the target
-        is likely to be, trained by regression on the house's plan (session 14, docs/training.md). The
-        sub-policy then picks goals from it rather than from the goal logits.
+        is likely to be, trained by regression on the house's plan (session 14, docs/training.md).
+      goals: What the sub-policy picks its goals from: ``logits`` (the goal logits' argmax; the
+        potential head, if any, is then a training loss only) or ``potential`` (the walk down the
+        predicted potential, ``goal_teacher.potential_goal``; needs ``potential``).
+      decoder: How the potential head maps the features to the window's cells: ``linear`` (one
+        Linear layer from the feature vector, as the goal logits) or ``conv`` (transposed convs back
+        up the conv stack, each joined by that level's maps, as a U-Net: a dense map keeps its walls).
     """
 
     width: int = 40
@@ -194,6 +199,8 @@ class GoalNetConfig:
     semantic: bool = False
     room_bits: bool = False
     potential: bool = False
+    decoder: str = "linear"
+    goals: str = "logits"
 
     @property
     def input_channels(self) -> int:
@@ -210,6 +217,14 @@ class GoalNetConfig:
         for name in ("context", "cues", "semantic", "room_bits", "potential"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
+        if self.decoder not in ("linear", "conv"):
+            raise ValueError(f"decoder {self.decoder!r}: expected 'linear' or 'conv'")
+        if self.goals not in ("logits", "potential"):
+            raise ValueError(f"goals {self.goals!r}: expected 'logits' or 'potential'")
+        if self.goals == "potential" and not self.potential:
+            raise ValueError("goals 'potential' are read off the potential head: expected potential True")
+        if self.decoder == "conv" and not self.potential:
+            raise ValueError("decoder 'conv' decodes the potential head: expected potential True")
         if self.window % 2 ** len(self.channels):
             raise ValueError(f"window {self.window} must be a multiple of 2 ** {len(self.channels)} "
                              f"(one halving per conv layer)")

@@ -486,7 +486,20 @@ class GoalNet(_Net):
         bits = rooms.NUM_ROOM_TYPES if config.room_bits else 0
         features = config.hidden + config.num_nodes + bits
         self.out = _layer_init(nn.Linear(features, config.window ** 2), std=0.01)
-        self.potential = _layer_init(nn.Linear(features, config.window ** 2), std=0.01) if config.potential else None
+        self.potential = _layer_init(nn.Linear(features, config.window ** 2), std=0.01) \
+            if config.potential and config.decoder == "linear" else None
+        self.up = None
+        if config.potential and config.decoder == "conv":
+            # From the deepest maps (+ node and bits as constant planes) up to the window, each level
+            # joined by the encoder's maps of its size, the last by the input map itself.
+            widths = [8 * 2 ** k for k in reversed(range(len(config.channels)))]
+            skips = [config.input_channels, *config.channels[:-1]][::-1]
+            layers, in_channels = [], config.channels[-1] + config.num_nodes + bits
+            for width, skip in zip(widths, skips):
+                layers.append(_layer_init(nn.ConvTranspose2d(in_channels, width, 4, 2, 1)))
+                in_channels = width + skip
+            self.up = nn.ModuleList(layers)
+            self.potential = _layer_init(nn.Conv2d(in_channels, 1, 3, 1, 1), std=0.01)
 
     def forward(self, egomap: torch.Tensor, node: torch.Tensor, bits: torch.Tensor | None = None) -> torch.Tensor:
         """Goal logits (B, window ** 2), row-major over the window, from maps (B, C, window, window)
@@ -515,7 +528,13 @@ class GoalNet(_Net):
                                                      < cfg.num_nodes):
             raise ValueError(f"node has shape {tuple(node.shape)} and values {node.tolist()[:8]}; expected "
                              f"({egomap.shape[0]},) indices in [0, {cfg.num_nodes})")
-        inputs = [self.conv(egomap.float()), F.one_hot(node.long(), cfg.num_nodes).float()]
+        x = egomap.float()
+        levels = [x]  # the input and each conv layer's maps, for the conv decoder
+        for module in self.conv:
+            x = module(x)
+            if isinstance(module, nn.ReLU) and x.dim() == 4:
+                levels.append(x)
+        inputs = [x, F.one_hot(node.long(), cfg.num_nodes).float()]
         if cfg.room_bits != (bits is not None):
             raise ValueError(f"room-type bits {'missing' if bits is None else 'given'}: this network "
                              f"{'reads' if cfg.room_bits else 'does not read'} them (room_bits={cfg.room_bits})")
@@ -525,7 +544,14 @@ class GoalNet(_Net):
                                  f"{rooms.NUM_ROOM_TYPES})")
             inputs.append(bits.float())
         features = torch.cat(inputs, dim=1)
-        return self.out(features), self.potential(features) if self.potential is not None else None
+        if self.up is None:
+            return self.out(features), self.potential(features) if self.potential is not None else None
+        deepest = levels.pop()
+        condition = features[:, cfg.hidden:, None, None].expand(-1, -1, *deepest.shape[-2:])
+        x = torch.cat([deepest, condition], dim=1)
+        for layer, skip in zip(self.up, reversed(levels)):
+            x = torch.cat([F.relu(layer(x)), skip], dim=1)
+        return self.out(features), self.potential(x).flatten(1)
 
 
 _NETS = {

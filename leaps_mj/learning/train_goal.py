@@ -93,9 +93,11 @@ class GoalTrainConfig:
         policy μ_s, ``python -m leaps_mj.evaluate --agent aug``; stored with each sample).
       potential: Whether the network also has the potential head (``nets.GoalNetConfig.potential``),
         trained by regression on the teacher's potential labels
-        (:meth:`leaps_mj.environment.goal_teacher.TeacherGoals.labels`, stored with each sample), and
-        picks its goals from it (:func:`leaps_mj.learning.goal_policy.choose_goal`) when it drives.
+        (:meth:`leaps_mj.environment.goal_teacher.TeacherGoals.labels`, stored with each sample).
       potential_coef: Weight of the potential's smooth-L1 loss (metres) beside the goal cross-entropy.
+      decoder: The potential head's decoder (``nets.GoalNetConfig.decoder``: ``linear`` or ``conv``).
+      goals: What the network's goals are picked from (``nets.GoalNetConfig.goals``: ``logits`` or
+        ``potential``), when it drives the training episodes and as the sub-policy.
       teacher: Whose path the goal labels follow: ``geodesic``
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
@@ -139,6 +141,8 @@ class GoalTrainConfig:
     room_bits: bool = False
     potential: bool = False
     potential_coef: float = 1.0
+    decoder: str = "linear"
+    goals: str = "logits"
     teacher: str = "geodesic"
     method: str = "dagger"
     init_from: str = ""
@@ -154,7 +158,8 @@ class GoalTrainConfig:
     def net_config(self) -> nets.GoalNetConfig:
         """The architecture of the network this run trains."""
         return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues,
-                                 semantic=self.semantic, room_bits=self.room_bits, potential=self.potential)
+                                 semantic=self.semantic, room_bits=self.room_bits, potential=self.potential,
+                                 decoder=self.decoder, goals=self.goals)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
