@@ -184,7 +184,8 @@ class GoalNetConfig:
         predicted potential, ``goal_teacher.potential_goal``; needs ``potential``).
       decoder: How the potential head maps the features to the window's cells: ``linear`` (one
         Linear layer from the feature vector, as the goal logits) or ``conv`` (transposed convs back
-        up the conv stack, each joined by that level's maps, as a U-Net: a dense map keeps its walls).
+        up the conv stack to half the window's size, each joined by that level's maps, as a U-Net,
+        then upsampled: a dense map keeps its walls).
     """
 
     width: int = 40

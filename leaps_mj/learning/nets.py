@@ -490,10 +490,11 @@ class GoalNet(_Net):
             if config.potential and config.decoder == "linear" else None
         self.up = None
         if config.potential and config.decoder == "conv":
-            # From the deepest maps (+ node and bits as constant planes) up to the window, each level
-            # joined by the encoder's maps of its size, the last by the input map itself.
-            widths = [8 * 2 ** k for k in reversed(range(len(config.channels)))]
-            skips = [config.input_channels, *config.channels[:-1]][::-1]
+            # From the deepest maps (+ node and bits as constant planes) up to the first conv layer's
+            # half-size grid, each level joined by the encoder's maps of its size; the potential is
+            # scored there and upsampled (full size costs this machine 3x the learner's time).
+            widths = [16 * 2 ** k for k in reversed(range(len(config.channels) - 1))]
+            skips = list(config.channels[:-1])[::-1]
             layers, in_channels = [], config.channels[-1] + config.num_nodes + bits
             for width, skip in zip(widths, skips):
                 layers.append(_layer_init(nn.ConvTranspose2d(in_channels, width, 4, 2, 1)))
@@ -549,9 +550,10 @@ class GoalNet(_Net):
         deepest = levels.pop()
         condition = features[:, cfg.hidden:, None, None].expand(-1, -1, *deepest.shape[-2:])
         x = torch.cat([deepest, condition], dim=1)
-        for layer, skip in zip(self.up, reversed(levels)):
+        for layer, skip in zip(self.up, reversed(levels[1:])):
             x = torch.cat([F.relu(layer(x)), skip], dim=1)
-        return self.out(features), self.potential(x).flatten(1)
+        potential = F.interpolate(self.potential(x), size=egomap.shape[-2:], mode="bilinear", align_corners=False)
+        return self.out(features), potential.flatten(1)
 
 
 _NETS = {
