@@ -9,7 +9,7 @@ import pytest
 
 from leaps_mj.environment import episodes, roomnav
 from leaps_mj.evaluation import harness, hops, stats
-from leaps_mj.learning import policies
+from leaps_mj.learning import goal_policy, policies
 from leaps_mj.world import rooms
 
 
@@ -115,9 +115,14 @@ def test_main_runs_resumes_and_pairs_with_a_baseline(hop_dataset, tmp_path, monk
     assert (base / "results.md").read_text() == table
     monkeypatch.undo()
 
-    # The shipped checkpoints as a "new" folder: the same seeds give the same episodes, p = 1.
+    # The default sub-policy is the shipped map-goal one (as evaluate's); `cpu` names the shipped μ(θ), recorded
+    # as no folder (left out of config.json), as the hop folders made before the names were.
+    assert summary["config"]["policy_dir"] == "goal_cpu"
+    assert _main(dataset, tmp_path / "mu", "--agent", "oracle", "--policy-dir", "cpu") == 0
+    assert "policy_dir" not in json.loads((tmp_path / "mu" / "summary.json").read_text())["config"]
+    # The shipped checkpoints by their path as a "new" folder: the same seeds give the same episodes, p = 1.
     new = tmp_path / "new"
-    assert _main(dataset, new, "--agent", "pure", "--policy-dir", str(policies.DEFAULT_DIR),
+    assert _main(dataset, new, "--agent", "pure", "--policy-dir", str(goal_policy.DEFAULT_DIR),
                  "--baseline", str(base)) == 0
     printed = capsys.readouterr().out
     assert "exact McNemar p = 1" in printed and "only here 0, only baseline 0" in printed

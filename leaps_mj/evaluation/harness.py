@@ -596,7 +596,7 @@ def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: path
     return summary
 
 
-def _policy_dir(subpolicy: str, policy_dir: str | None) -> str | None:
+def command_line_policy_dir(subpolicy: str, policy_dir: str | None) -> str | None:
     """``EvalConfig.policy_dir`` for the command line's choice: the shipped map-goal folder's name by default with
     learned sub-policies; the shipped μ(θ) (name ``cpu``) as None, as result folders made before it was named
     record it."""
@@ -643,7 +643,7 @@ def main(argv=None) -> int:
     if horizons[0] < 1:
         p.error(f"--horizon {args.horizon}: expected positive integers")
     where = backends.from_arguments(p, args)
-    args.policy_dir = _policy_dir(args.subpolicy, args.policy_dir)
+    args.policy_dir = command_line_policy_dir(args.subpolicy, args.policy_dir)
     args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,

@@ -163,7 +163,7 @@ def _cell(r: dict) -> str:
 def _policy_name(config: harness.EvalConfig) -> str:
     if config.subpolicy == "local":
         return "the local expert (privileged)"
-    shipped = "learned, shipped (`leaps_mj/data/policies/cpu`)"
+    shipped = "learned, shipped μ(θ) (`leaps_mj/data/policies/cpu`)"
     which = f"learned, `{config.policy_dir}`" if config.policy_dir else shipped
     return which if config.temperature == 1.0 else f"{which}, sampled at temperature {config.temperature:g}"
 
@@ -290,8 +290,10 @@ def main(argv=None) -> int:
                    help="step budgets reported; each episode runs to the largest")
     p.add_argument("--out", type=pathlib.Path, required=True, help="result folder (resumable)")
     p.add_argument("--subpolicy", choices=["local", "learned"], default="learned",
-                   help="learned: the shipped sub-policies or --policy-dir; local: the privileged local expert")
-    p.add_argument("--policy-dir", default=None, help="folder of sub-policy checkpoints <node>.pt to evaluate")
+                   help="learned: the sub-policies of --policy-dir; local: the privileged local expert")
+    p.add_argument("--policy-dir", default=None,
+                   help="folder of sub-policy checkpoints to evaluate, or a shipped folder's name: goal_cpu (the "
+                        "map-goal sub-policy, the default) or cpu (μ(θ))")
     p.add_argument("--temperature", type=float, default=1.0,
                    help="sampling temperature of the learned sub-policies' actions (1: as trained)")
     p.add_argument("--baseline", type=pathlib.Path, default=None,
@@ -315,7 +317,8 @@ def main(argv=None) -> int:
     try:
         config = harness.EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1],
                                     subpolicy=args.subpolicy, seed=args.seed, episodes="hops",
-                                    policy_dir=args.policy_dir, temperature=args.temperature)
+                                    policy_dir=harness.command_line_policy_dir(args.subpolicy, args.policy_dir),
+                                    temperature=args.temperature)
         specs = episodes_lib.load_split(args.dataset, args.split, "hops")
         # Node filter after the draw: a run on some nodes gets the full run's episodes of those nodes.
         indices = [i for i in episodes_lib.select_episodes(specs, args.per_node or SUBSETS[args.subset],
