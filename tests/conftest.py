@@ -1,5 +1,6 @@
-"""Shared fixtures: a tiny generated house dataset with fixed episodes, a small local Ray instance."""
+"""Shared fixtures: a tiny generated house dataset with fixed episodes, a small local Ray instance, the tools/ loader."""
 
+import importlib.util
 import pathlib
 
 import pytest
@@ -54,3 +55,17 @@ def ray_two_nodes():
     finally:
         ray.shutdown()
         cluster.shutdown()
+
+
+@pytest.fixture
+def load_tool():
+    """Imports a script of ``tools/`` by name (they are not a package)."""
+
+    def load(name: str):
+        path = pathlib.Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        tool = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(tool)
+        return tool
+
+    return load

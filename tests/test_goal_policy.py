@@ -479,7 +479,7 @@ def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
         assert goal_policy.choose_goal(other, driver, window) == 7
 
 
-def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, tmp_path):
+def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, tmp_path, load_tool, capsys):
     config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), potential=True, mirror=True,
                                  rotate=True)
     trainer = train_goal.GoalTrainer(config, tmp_path, progress=False)
@@ -497,6 +497,14 @@ def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, t
     label = torch.tensor([2 * mapping.WINDOW + 5])
     turned, moved = train_goal.rotate(*train_goal.mirror(potential, label, torch.tensor([True])), torch.tensor([1]))
     assert turned.flatten()[moved].item() == -8.0
+    # tools/potential_maps.py draws the labels and the prediction, and scores the walk down each.
+    tool = load_tool("potential_maps")
+    out = tmp_path / "maps.png"
+    assert tool.main(["--data", str(tmp_path / "data" / "round_001.npz"), "--net", f"tiny={tmp_path / 'goal.pt'}",
+                      "--samples", "2", "--out", str(out)]) == 0
+    assert out.stat().st_size > 10_000 and "| labels | 0 |" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        tool.main(["--data", str(tmp_path / "data" / "round_001.npz"), "--net", "tiny", "--out", str(out)])
     with pytest.raises(ValueError, match="potential True with method 'reinforce'"):
         dataclasses.replace(config, method="reinforce")
     with pytest.raises(ValueError, match="potential_coef -1"):

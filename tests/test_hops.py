@@ -159,10 +159,10 @@ def test_a_partial_checkpoint_folder_runs_on_its_nodes(hop_dataset, tmp_path, ca
     assert rows and {r["target"] for r in rows} == {"kitchen"}
 
 
-def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys):
+def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys, load_tool):
     """tools/hop_actions.py: the observable teacher rarely reverses a turn; bad counts are refused."""
     dataset = hop_dataset[0]
-    tool = _load_tool("hop_actions")
+    tool = load_tool("hop_actions")
     assert tool.main(["--dataset", str(dataset), "--agent", "observable", "--every", "1", "--limit", "4"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("4 one-door hop episodes") and "action shares:" in out
@@ -172,22 +172,11 @@ def test_hop_actions_tool_counts_turn_reversals(hop_dataset, capsys):
         tool.main(["--dataset", str(dataset), "--every", "0"])
 
 
-def _load_tool(name: str):
-    import importlib.util
-    import pathlib
-
-    path = pathlib.Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    return tool
-
-
-def test_hop_curve_tool_plots_shipped_results(tmp_path, capsys, monkeypatch):
+def test_hop_curve_tool_plots_shipped_results(load_tool, tmp_path, capsys, monkeypatch):
     """tools/hop_curve.py plots committed hop results; it refuses bad specs and runs of other episodes."""
     import pathlib
 
-    tool = _load_tool("hop_curve")
+    tool = load_tool("hop_curve")
     out = tmp_path / "curve.png"
     results = pathlib.Path(__file__).resolve().parents[1] / "results"
     monkeypatch.chdir(results.parent)   # the printed table names the folders as given
@@ -206,11 +195,11 @@ def test_hop_curve_tool_plots_shipped_results(tmp_path, capsys, monkeypatch):
     assert "ran other episodes" in capsys.readouterr().err
 
 
-def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(hop_dataset, tmp_path, capsys):
+def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(load_tool, hop_dataset, tmp_path, capsys):
     """tools/hop_visibility.py: groups cover the one-door hops; a target in the first frame is in view on turning;
     folders of other episodes are refused."""
     dataset, eps, _ = hop_dataset
-    tool = _load_tool("hop_visibility")
+    tool = load_tool("hop_visibility")
     group_of = tool.groups(str(dataset), "test", 1)
     assert set(group_of) == {i for i, s in enumerate(eps) if s.plan_length == 1}
     assert set(group_of.values()) <= set(tool.GROUPS)
