@@ -412,9 +412,10 @@ def test_the_shipped_checkpoints_stay_within_20_mb():
     assert sum(sizes.values()) <= 20 * 2 ** 20, {str(p): s for p, s in sizes.items()}
 
 
-def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(env):
+def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(tiny_dataset):
     """The potential labels: int8 quarter metres in range, high in walls; the decoder's walk down them
     ends near the teacher's goal (both lie about 3 m down the way to the target)."""
+    env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=W, height=H, horizon=60, max_start_doors=1)
     teacher = goal_teacher.TeacherGoals(env)
     agent = registry.make_agent("oracle-map", env, seed=0)
     agent.width, agent.height = W, H
@@ -436,6 +437,7 @@ def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(en
             ts = env.step(action)
     assert near >= 0.8 * checked
     assert teacher.labels(agent.driver.mapper, agent.driver.pose, potential=False)[1] is None
+    env.close()
 
 
 def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):

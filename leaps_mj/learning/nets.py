@@ -490,13 +490,11 @@ class GoalNet(_Net):
             if config.potential and config.decoder == "linear" else None
         self.up = None
         if config.potential and config.decoder == "conv":
-            # From the deepest maps (+ node and bits as constant planes) up to the first conv layer's
-            # half-size grid, each level joined by the encoder's maps of its size; the potential is
-            # scored there and upsampled (full size costs this machine 3x the learner's time).
+            # From the deepest maps (+ node and bits as planes) up to half the window, each level joined by the
+            # encoder's maps of its size, then upsampled (full size costs this machine 3x the learner's time).
             widths = [16 * 2 ** k for k in reversed(range(len(config.channels) - 1))]
-            skips = list(config.channels[:-1])[::-1]
             layers, in_channels = [], config.channels[-1] + config.num_nodes + bits
-            for width, skip in zip(widths, skips):
+            for width, skip in zip(widths, reversed(config.channels[:-1])):
                 layers.append(_layer_init(nn.ConvTranspose2d(in_channels, width, 4, 2, 1)))
                 in_channels = width + skip
             self.up = nn.ModuleList(layers)
