@@ -94,7 +94,11 @@ class GoalTrainConfig:
       potential: Whether the network also has the potential head (``nets.GoalNetConfig.potential``),
         trained by regression on the teacher's potential labels
         (:meth:`leaps_mj.environment.goal_teacher.TeacherGoals.labels`, stored with each sample).
-      potential_coef: Weight of the potential's smooth-L1 loss (metres) beside the goal cross-entropy.
+      potential_coef: Weight of the potential's loss (metres) beside the goal cross-entropy.
+      potential_quantile: Which quantile of the potential, over what the map leaves open, the head
+        predicts: 0.5 trains it with the smooth-L1 loss (a robust central value), any other value in
+        (0, 1) with that quantile's pinball loss (below 0.5: optimistic — a way that *may* lead on
+        scores low even where another may too; see :func:`potential_loss`).
       decoder: The potential head's decoder (``nets.GoalNetConfig.decoder``: ``linear`` or ``conv``).
       goals: What the network's goals are picked from (``nets.GoalNetConfig.goals``: ``logits`` or
         ``potential``), when it drives the training episodes and as the sub-policy.
@@ -141,6 +145,7 @@ class GoalTrainConfig:
     room_bits: bool = False
     potential: bool = False
     potential_coef: float = 1.0
+    potential_quantile: float = 0.5
     decoder: str = "linear"
     goals: str = "logits"
     teacher: str = "geodesic"
@@ -182,6 +187,8 @@ class GoalTrainConfig:
         for name in ("bc_coef", "potential_coef"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
+        if not 0.0 < self.potential_quantile < 1.0:
+            raise ValueError(f"potential_quantile {self.potential_quantile!r}: expected a value in (0, 1)")
         if self.potential and self.method == "reinforce":
             raise ValueError("potential True with method 'reinforce': policy-gradient fine-tuning trains the goal "
                              "logits only; expected potential False")
@@ -298,6 +305,15 @@ def goal_loss(logits: torch.Tensor, labels: torch.Tensor, sigma: float) -> torch
     d2 = (cells[None, :, None] - rows[:, None, None]) ** 2 + (cells[None, None, :] - cols[:, None, None]) ** 2
     target = torch.softmax(-d2.reshape(len(labels), -1) / (2 * sigma ** 2), dim=1)
     return -(target * F.log_softmax(logits, dim=1)).sum(1).mean()
+
+
+def potential_loss(predicted: torch.Tensor, labels: torch.Tensor, quantile: float) -> torch.Tensor:
+    """Loss of predicted potentials against their labels (both metres, same shape): smooth L1 at
+    ``quantile`` 0.5, else the pinball loss whose minimiser is that quantile of the labels."""
+    if quantile == 0.5:
+        return F.smooth_l1_loss(predicted, labels)
+    error = labels - predicted
+    return torch.maximum(quantile * error, (quantile - 1.0) * error).mean()
 
 
 def mirror(maps: torch.Tensor, labels: torch.Tensor, which: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -470,9 +486,10 @@ class GoalTrainer(trainer_lib.Trainer):
                                                  _bits(c, data, idx))
             loss = goal_loss(logits, labels, c.label_sigma)
             if c.potential:
-                potential_loss = F.smooth_l1_loss(potential, maps[:, channels].flatten(1) * mapping.CELL)
-                loss = loss + c.potential_coef * potential_loss
-                potential_losses.append(potential_loss.item())
+                regression = potential_loss(potential, maps[:, channels].flatten(1) * mapping.CELL,
+                                            c.potential_quantile)
+                loss = loss + c.potential_coef * regression
+                potential_losses.append(regression.item())
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()
