@@ -511,3 +511,15 @@ def test_the_trainer_regresses_the_potential_turned_with_the_map(tiny_dataset, t
         dataclasses.replace(config, method="reinforce")
     with pytest.raises(ValueError, match="potential_coef -1"):
         dataclasses.replace(config, potential_coef=-1.0)
+
+
+def test_the_potential_loss_is_smooth_l1_at_the_median_and_fits_other_quantiles():
+    labels = torch.tensor([0.0, 10.0] * 50)  # two ways on, equally likely: 0 or 10 m farther
+    torch.testing.assert_close(train_goal.potential_loss(torch.zeros(100), labels, 0.5),
+                               torch.nn.functional.smooth_l1_loss(torch.zeros(100), labels))
+    for quantile, expected in ((0.2, 0.0), (0.8, 10.0)):  # optimistic: the nearer way; pessimistic: the farther
+        values = torch.linspace(-2.0, 12.0, 141)
+        losses = [train_goal.potential_loss(v.expand(100), labels, quantile).item() for v in values]
+        assert abs(values[int(np.argmin(losses))].item() - expected) < 0.11
+    with pytest.raises(ValueError, match="potential_quantile 1.0"):
+        train_goal.GoalTrainConfig(potential_quantile=1.0)
