@@ -456,7 +456,8 @@ def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
         nets.GoalNetConfig(potential=True, goals="map")
     conv = nets.GoalNet(dataclasses.replace(config, decoder="conv", context=True, semantic=True, room_bits=True))
     maps2 = torch.zeros(2, conv.config.input_channels, mapping.WINDOW, mapping.WINDOW)
-    assert conv.heads(maps2, torch.tensor([0, 3]), torch.zeros(2, rooms.NUM_ROOM_TYPES))[1].shape == (2, mapping.WINDOW ** 2)
+    potential = conv.heads(maps2, torch.tensor([0, 3]), torch.zeros(2, rooms.NUM_ROOM_TYPES))[1]
+    assert potential.shape == (2, mapping.WINDOW ** 2)
     with pytest.raises(ValueError, match="decoder 'conv' decodes the potential head"):
         nets.GoalNetConfig(decoder="conv")
     with pytest.raises(ValueError, match="decoder 'unet'"):

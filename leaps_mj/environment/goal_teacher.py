@@ -30,7 +30,8 @@ POTENTIAL_RANGE = (-6.0, 8.0)
 #: teacher's goals lie down the path.
 DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
 #: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
-_SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3) for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
+_SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3)
+                  for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
 
 
 def potential_goal(potential: np.ndarray) -> int:
@@ -108,8 +109,8 @@ class TeacherGoals:
         :data:`POTENTIAL_RANGE` (cells with no free part — walls, furniture, outside the house — at
         its top), in :data:`leaps_mj.environment.mapping.CELL` units: (WINDOW, WINDOW) int8, oriented
         as the egocentric map. Descending it from the agent's cell follows the shortest path
-        (:func:`potential_goal`). Unlike the goal cell, which is
-        one choice a learner that has not seen the way cannot always read off its map, these labels
+        (:func:`potential_goal`). Unlike the goal cell, which is one choice a learner that has not
+        seen the way cannot always read off its map, these labels
         score every cell, so a network regressing them learns how far the target is likely to be
         through each part of the map (the potential functions of PONI, Ramakrishnan et al., 2022).
         """

@@ -50,8 +50,9 @@ def choose_goal(net: nets.GoalNet, driver: map_navigation.GoalDriver, window, bi
     """The network's goal for the driver's current map, as a row-major window cell.
 
     With ``goals`` ``logits`` (``nets.GoalNetConfig``), the cell of the highest goal logit; with
-    ``potential``, the end of the walk down its predicted potential (:func:`leaps_mj.environment.goal_teacher.potential_goal`): the way
-    towards where the target most likely lies, as the teacher's goal is the way down the true one.
+    ``potential``, the end of the walk down its predicted potential
+    (:func:`leaps_mj.environment.goal_teacher.potential_goal`): the way towards where the target most
+    likely lies, as the teacher's goal is the way down the true one.
 
     Args:
       net: The map-goal network.

@@ -476,7 +476,8 @@ class GoalTrainer(trainer_lib.Trainer):
             channels = self.model.config.input_channels
             maps = _unpack(data["maps"][idx], channels)
             if c.potential:  # turned with the map: its last channel
-                maps = torch.cat([maps.float(), torch.as_tensor(data["potential"][idx], dtype=torch.float32)[:, None]], 1)
+                potential_labels = torch.as_tensor(data["potential"][idx], dtype=torch.float32)[:, None]
+                maps = torch.cat([maps.float(), potential_labels], 1)
             labels = torch.as_tensor(data["label"][idx])
             if c.mirror:
                 maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
