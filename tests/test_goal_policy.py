@@ -93,7 +93,8 @@ def env(tiny_dataset):
     e.close()
 
 
-@pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable", "oracle-map-potential"])
+@pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable", "oracle-map-furniture", "oracle-map-sensed",
+                                  "oracle-map-potential"])
 def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env, name):
     agent = registry.make_agent(name, env, seed=0)
     agent.width, agent.height = W, H
@@ -134,6 +135,29 @@ def test_observable_goals_follow_the_exploration_walk_until_the_target_room_is_s
     assert walked and finished and differ  # exploring, it does not always head where the map leads
 
 
+def test_the_sensed_teacher_explores_only_mapped_doors_and_else_looks_around(env):
+    agent = registry.make_agent("oracle-map-sensed", env, seed=0)
+    agent.width, agent.height = W, H
+    looked = walked = 0
+    for _ in range(4):
+        ts = env.reset()
+        agent.reset(env.episode.target)
+        doors = env.task.house_model.house.doors
+        while not ts.last():
+            action = agent.step(ts)
+            teacher, mapper = agent.teacher, agent.driver.mapper
+            label = teacher.cell(mapper, agent.driver.pose)
+            if not teacher.expert.target_revealed():
+                if teacher.expert.goal is None:  # no mapped door left: the agent's own cell
+                    assert label == (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2
+                    looked += 1
+                else:
+                    assert goal_teacher.door_mapped(mapper, doors[teacher.expert.goal[0]].center)
+                    walked += 1
+            ts = env.step(action)
+    assert looked and walked
+
+
 def test_the_trainer_labels_with_the_teacher_its_config_names(tiny_dataset, tmp_path):
     config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), teacher="observable")
     shard, = train_goal.training_env.training_houses(config.dataset, None, 0, 1, tmp_path, name="goal")
@@ -141,6 +165,7 @@ def test_the_trainer_labels_with_the_teacher_its_config_names(tiny_dataset, tmp_
     assert len(samples["label"]) == len(samples["maps"]) > 0 and samples["teacher"].all()
     with pytest.raises(ValueError, match="teacher 'map'"):
         train_goal.GoalTrainConfig(teacher="map")
+    assert set(train_goal.TEACHERS) == {"geodesic", "observable", "observable-furniture", "sensed"}
 
 
 def test_goal_net_shapes_and_errors():

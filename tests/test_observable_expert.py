@@ -10,6 +10,7 @@ from leaps_mj.environment import roomnav
 from leaps_mj.environment.expert import GeodesicExpert
 from leaps_mj.environment.observable_expert import REVEAL_FRACTION, ObservableExpert
 from leaps_mj.learning import policy_config, train_policy, training_env
+from leaps_mj.world import rooms
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +58,29 @@ def test_revealed_rooms_grow_and_follow_the_frames(env, hop_episodes):
             break
     assert len(history[-1]) > len(history[0]), "walking on reveals more rooms"
     assert len(teacher.visited) > 1, "the exploration walk passed a door"
+
+
+def test_furniture_reveals_only_rooms_whose_furniture_is_in_the_frame(env, hop_episodes):
+    with pytest.raises(ValueError, match="reveal 'floor'"):
+        ObservableExpert(env, reveal="floor")
+    spec = next(s for s in hop_episodes if s.plan_length == 2)
+    env.reset_to(spec)
+    by_room, by_furniture = ObservableExpert(env, seed=1), ObservableExpert(env, seed=1, reveal="furniture")
+    furniture = np.isin(env.segment_luts[0], [rooms.seg_class_index(c) for c in rooms.FURNITURE_CLASSES])
+    fewer = False
+    for _ in range(40):
+        before = set(by_furniture.revealed)
+        action = by_room.act()
+        by_furniture.observe()
+        ids = np.where(furniture.take(env.task.segments), env.segment_luts[3].take(env.task.segments), -1).ravel() + 1
+        shares = np.bincount(ids, minlength=len(env.task.house_model.house.rooms) + 1)[1:] / ids.size
+        assert by_furniture.revealed <= by_room.revealed and by_furniture.visited == by_room.visited
+        for r in by_furniture.revealed - before - by_furniture.visited:  # newly revealed by this frame's furniture
+            assert shares[r] >= REVEAL_FRACTION
+        fewer |= by_furniture.revealed < by_room.revealed
+        if env.step(action).last():
+            break
+    assert fewer, "a room seen by its floor or walls alone is not revealed by furniture"
 
 
 def test_memory_is_per_episode(env, hop_episodes):

@@ -7,7 +7,9 @@ as the learned sub-policy: the learned policy's ceiling, with perfect goals.
 It reads the house's map (privileged), as the geodesic expert does.
 :class:`ObservableTeacherGoals` (the ``oracle-map-observable`` agent) follows
 the observable expert instead, whose choice of door rests only on what the
-episode has shown.
+episode has shown; :class:`FurnitureTeacherGoals` and :class:`SensedTeacherGoals` (agents
+``oracle-map-furniture``, ``oracle-map-sensed``) take away, in turn, what the agent cannot sense of
+that: the type of a room seen only by its floor, and the doors it has never had in view.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ POTENTIAL_RANGE = (-6.0, 8.0)
 #: Window cells the walk down a potential takes to its goal (:func:`potential_goal`): as far as the
 #: teacher's goals lie down the path.
 DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
+#: Metres from a door's centre within which a mapped lintel counts as the door seen (:class:`SensedTeacherGoals`).
+DOOR_SEEN = 0.5
 #: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
 _SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3)
                   for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
@@ -65,12 +69,13 @@ class TeacherGoals:
       seed: Seed of the expert (its random moves are not used).
     """
 
-    #: The expert whose steering fields the goals follow.
+    #: The expert whose steering fields the goals follow, and the options it is built with.
     expert_class = expert_lib.GeodesicExpert
+    expert_options: dict = {}
 
     def __init__(self, env, seed: int = 0):
         self.env = env
-        self.expert = self.expert_class(env, seed=seed, lookahead=TEACHER_LOOKAHEAD)
+        self.expert = self.expert_class(env, seed=seed, lookahead=TEACHER_LOOKAHEAD, **self.expert_options)
         self._fields: dict[tuple[str, str, tuple[int, ...]], tuple[np.ndarray, np.ndarray]] = {}
         self._plain: tuple[np.ndarray, np.ndarray] | None = None  # the last steering field and its zone's plain field
 
@@ -176,3 +181,43 @@ class ObservableTeacherGoals(TeacherGoals):
                 return walk
         target = self.env.task.episode.target
         return self._field(target, self.expert.target_rooms(target))
+
+
+class FurnitureTeacherGoals(ObservableTeacherGoals):
+    """:class:`ObservableTeacherGoals` with rooms revealed by their furniture only
+    (``ObservableExpert(reveal="furniture")``): the agent's segmentation shows one floor class and
+    one ceiling class, so a glimpse of a room's floor tells the learner nothing of its type."""
+
+    expert_options = {"reveal": "furniture"}
+
+
+class SensedTeacherGoals(FurnitureTeacherGoals):
+    """:class:`FurnitureTeacherGoals` exploring only the doors the agent has mapped.
+
+    The observable expert walks to the doors of the house's plan, those the agent has never had in
+    view too. This teacher explores a door only once the agent's own map
+    (:class:`leaps_mj.environment.mapping.EgoMapper`) shows a door lintel within
+    :data:`DOOR_SEEN` metres of its centre; with none left to explore and no room of the target's
+    type revealed, its goal is the agent's own cell, where the walk looks around
+    (:class:`leaps_mj.environment.map_navigation.GoalDriver`). What it still reads off the plan is
+    which room the agent stands in and where the rooms beyond mapped doors lie.
+    """
+
+    def labels(self, mapper: mapping.EgoMapper, pose, potential: bool) -> tuple[int, np.ndarray | None]:
+        self.expert.door_filter = lambda centre: door_mapped(mapper, centre)
+        cell, labels = super().labels(mapper, pose, potential)
+        if not self.expert.target_revealed() and self.expert.goal is None:
+            cell = (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2
+        return cell, labels
+
+
+def door_mapped(mapper: mapping.EgoMapper, centre) -> bool:
+    """Whether the map's ``door`` channel has a cell within :data:`DOOR_SEEN` metres (in cells) of a
+    door's centre (x, y)."""
+    rows, cols, inside = mapper.cells(centre[0], centre[1])
+    if not bool(inside):
+        return False
+    reach = round(DOOR_SEEN / mapping.CELL)
+    row, col = int(rows), int(cols)
+    door = mapper.grid[mapping.CHANNELS.index("door")]
+    return bool(door[max(0, row - reach):row + reach + 1, max(0, col - reach):col + reach + 1].any())

@@ -31,6 +31,13 @@ the episode so far:
   :data:`DOOR_PATIENCE` steps, is done, so it does not loop. With nothing
   left to explore it falls back on the geodesic expert.
 
+Two variants take away what the agent cannot sense (agents ``oracle-map-furniture`` and
+``oracle-map-sensed`` of the hop benchmark; session 15 of docs/training.md): ``reveal="furniture"``
+counts only the room's furniture towards :data:`REVEAL_FRACTION` (the learner's segmentation has one
+floor class and one ceiling class, so only furniture tells it a room's type), and
+:attr:`ObservableExpert.door_filter` restricts the doors it explores to those the agent has seen
+(:class:`leaps_mj.environment.goal_teacher.SensedTeacherGoals` sets it from the agent's own map).
+
 The memory is per episode: a new episode is detected by
 :meth:`leaps_mj.environment.expert.GeodesicExpert.new_episode`, since the
 sub-policy trainer calls :meth:`ObservableExpert.act` every step without
@@ -52,8 +59,11 @@ BEYOND_DOOR = 1.0
 ARRIVE_RADIUS = 0.5
 #: Steps after which an exploration walk to a door is given up (the door is then done).
 DOOR_PATIENCE = 50
-#: Index of the room-id table in ``RoomNavEnvironment.segment_luts``.
-_ROOM_LUT = 3
+#: What reveals a room (``ObservableExpert``'s ``reveal``): any of its pixels, or its furniture's only.
+REVEALS = ("room", "furniture")
+#: Indices of the class and room-id tables in ``RoomNavEnvironment.segment_luts``.
+_CLASS_LUT, _ROOM_LUT = 0, 3
+_FURNITURE = np.array([rooms.seg_class_index(c) for c in rooms.FURNITURE_CLASSES])
 
 
 class ObservableExpert(expert.GeodesicExpert):
@@ -63,16 +73,27 @@ class ObservableExpert(expert.GeodesicExpert):
       env: the :class:`leaps_mj.environment.roomnav.RoomNavEnvironment` whose episodes it solves.
       seed: seed of the small random moves it makes when blocked.
       lookahead: metres of path ahead used as the steering waypoint.
+      reveal: what reveals a room (:data:`REVEALS`): ``room``, any pixel of it (floor, ceiling, walls,
+        furniture); ``furniture``, its furniture's pixels only.
 
     Attributes:
       visited: ids of the rooms the agent has stood in this episode.
       revealed: ids of the rooms seen (or visited) this episode.
       passed: indices (in ``house.doors``) of the doors done this episode.
       goal: (door index, room id beyond it) of the current exploration walk, or None.
+      door_filter: None (every door of the plan may be explored), or a function of a door's centre
+        (x, y) saying whether it may.
+
+    Raises:
+      ValueError: for an unknown ``reveal``.
     """
 
-    def __init__(self, env, seed: int = 0, lookahead: float = 0.6):
+    def __init__(self, env, seed: int = 0, lookahead: float = 0.6, reveal: str = "room"):
+        if reveal not in REVEALS:
+            raise ValueError(f"reveal {reveal!r}: expected one of {list(REVEALS)}")
         super().__init__(env, seed=seed, lookahead=lookahead)
+        self.reveal = reveal
+        self.door_filter = None
         # Fields of the current house only (door walks, subsets of target rooms): bounded memory.
         self._house_id: str | None = None
         self._house_fields: dict[tuple, tuple] = {}
@@ -97,6 +118,8 @@ class ObservableExpert(expert.GeodesicExpert):
         if room >= 0:
             self.visited.add(room)
         ids = self.env.segment_luts[_ROOM_LUT].take(task.segments).ravel() + 1
+        if self.reveal == "furniture":
+            ids[~np.isin(self.env.segment_luts[_CLASS_LUT].take(task.segments).ravel(), _FURNITURE)] = 0
         counts = np.bincount(ids, minlength=len(hm.house.rooms) + 1)[1:]
         self.revealed.update(np.flatnonzero(counts >= REVEAL_FRACTION * ids.size).tolist())
         self.revealed |= self.visited
@@ -173,7 +196,7 @@ class ObservableExpert(expert.GeodesicExpert):
         """(door index, room beyond) of the next door to explore, or None when there is none left.
 
         Candidates are the doors not yet done from a visited room to an
-        unvisited one that the agent can reach. Doors to rooms not yet seen
+        unvisited one that the agent can reach (and that :attr:`door_filter` allows). Doors to rooms not yet seen
         come first, nearest first; then doors to seen rooms, those of the
         room types most often adjacent to the target's
         (:func:`leaps_mj.world.rooms.reference_prior`) first, then nearest;
@@ -189,6 +212,8 @@ class ObservableExpert(expert.GeodesicExpert):
             if index in self.passed or (a in self.visited) == (b in self.visited):
                 continue
             room = b if a in self.visited else a
+            if self.door_filter is not None and not self.door_filter(door.center):
+                continue
             field, nearest = self._door_field(index, room)
             metres = field[nearest[0, i, j], nearest[1, i, j]]
             if not np.isfinite(metres):

@@ -106,6 +106,8 @@ AGENTS = {
     "oracle-look": AgentSpec("oracle-look", "oracle-look"),
     "oracle-map": AgentSpec("oracle-map", "oracle-map"),
     "oracle-map-observable": AgentSpec("oracle-map-observable", "oracle-map-observable"),
+    "oracle-map-furniture": AgentSpec("oracle-map-furniture", "oracle-map-furniture"),
+    "oracle-map-sensed": AgentSpec("oracle-map-sensed", "oracle-map-sensed"),
     "oracle-map-potential": AgentSpec("oracle-map-potential", "oracle-map-potential"),
     "observable": AgentSpec("observable", "observable"),
     "frontier": AgentSpec("frontier", "frontier"),

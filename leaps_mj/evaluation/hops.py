@@ -49,8 +49,8 @@ from leaps_mj.world import rooms
 #: Step budgets reported: one LEAPS hand-over (N = 30) and two.
 HORIZONS = (30, 60)
 #: Agents of the benchmark (names of :data:`leaps_mj.evaluation.harness.AGENTS`).
-AGENTS = ("pure", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable", "oracle-map-potential",
-          "observable", "frontier", "random")
+AGENTS = ("pure", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable", "oracle-map-furniture",
+          "oracle-map-sensed", "oracle-map-potential", "observable", "frontier", "random")
 #: Named subsets: episodes per node and door distance (None: all).
 SUBSETS = {"full": None, "smoke": 1}
 #: The label of a run's sub-policy results, the one paired with a baseline's.

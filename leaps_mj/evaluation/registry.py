@@ -12,7 +12,8 @@ from leaps_mj.planning import agents
 
 #: Agent names accepted by :func:`make_agent`.
 AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable",
-               "oracle-map-potential", "observable", "frontier", "controller", "aug")
+               "oracle-map-furniture", "oracle-map-sensed", "oracle-map-potential", "observable", "frontier",
+               "controller", "aug")
 
 
 def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: int = 0, **kwargs) -> agents.Agent:
@@ -51,6 +52,10 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
         return agents.MapOracleAgent(env, seed)
     if name == "oracle-map-observable":
         return agents.ObservableMapOracleAgent(env, seed)
+    if name == "oracle-map-furniture":
+        return agents.FurnitureMapOracleAgent(env, seed)
+    if name == "oracle-map-sensed":
+        return agents.SensedMapOracleAgent(env, seed)
     if name == "oracle-map-potential":
         return agents.PotentialMapOracleAgent(env, seed)
     if name == "observable":

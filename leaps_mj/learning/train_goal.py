@@ -55,7 +55,8 @@ from leaps_mj.world import rooms
 
 
 #: The goal teachers by name (``GoalTrainConfig.teacher``).
-TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals}
+TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals,
+            "observable-furniture": goal_teacher.FurnitureTeacherGoals, "sensed": goal_teacher.SensedTeacherGoals}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,10 +103,11 @@ class GoalTrainConfig:
       decoder: The potential head's decoder (``nets.GoalNetConfig.decoder``: ``linear`` or ``conv``).
       goals: What the network's goals are picked from (``nets.GoalNetConfig.goals``: ``logits`` or
         ``potential``), when it drives the training episodes and as the sub-policy.
-      teacher: Whose path the goal labels follow: ``geodesic``
-        (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target) or ``observable``
+      teacher: Whose path the goal labels follow (:data:`TEACHERS`): ``geodesic``
+        (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target), ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
-        room has been seen).
+        room has been seen), ``observable-furniture`` (the same, rooms seen by their furniture only) or
+        ``sensed`` (that, exploring only the doors the agent has mapped).
       method: ``dagger`` (the rounds above) or ``reinforce``: each round the network's goals, sampled
         at ``temperature``, drive every episode, and the network takes a policy-gradient step on
         its goal choices (advantage: the episode's success minus the round's mean success for its

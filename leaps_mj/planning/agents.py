@@ -273,6 +273,22 @@ class ObservableMapOracleAgent(MapOracleAgent):
     teacher_class = goal_teacher.ObservableTeacherGoals
 
 
+class FurnitureMapOracleAgent(MapOracleAgent):
+    """The map-goal walk with :class:`leaps_mj.environment.goal_teacher.FurnitureTeacherGoals`: the
+    observable teacher with rooms revealed by their furniture only."""
+
+    name = "oracle-map-furniture"
+    teacher_class = goal_teacher.FurnitureTeacherGoals
+
+
+class SensedMapOracleAgent(MapOracleAgent):
+    """The map-goal walk with :class:`leaps_mj.environment.goal_teacher.SensedTeacherGoals`: the
+    observable teacher with rooms revealed by their furniture and only the doors on the agent's map."""
+
+    name = "oracle-map-sensed"
+    teacher_class = goal_teacher.SensedTeacherGoals
+
+
 class PotentialMapOracleAgent(MapOracleAgent):
     """The map-goal walk with goals read off the teacher's potential
     (:func:`leaps_mj.environment.goal_teacher.potential_goal` on
