@@ -455,6 +455,9 @@ def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(ti
             assert cell == teacher.cell(agent.driver.mapper, agent.driver.pose)
             assert potential.shape == (mapping.WINDOW, mapping.WINDOW) and potential.dtype == np.int8
             assert low <= potential.min() and potential.max() <= high and (potential == high).any()
+            # Relative to the agent, also where its own grid cell is not free (beside a wall or furniture).
+            centre = slice(mapping.WINDOW // 2 - 1, mapping.WINDOW // 2 + 2)
+            assert np.abs(potential[centre, centre]).min() <= 1
             row, col = divmod(goal_teacher.potential_goal(potential), mapping.WINDOW)
             goal_row, goal_col = divmod(cell, mapping.WINDOW)
             near += math.hypot(row - goal_row, col - goal_col) <= 6

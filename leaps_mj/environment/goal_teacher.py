@@ -77,7 +77,8 @@ class TeacherGoals:
         self.env = env
         self.expert = self.expert_class(env, seed=seed, lookahead=TEACHER_LOOKAHEAD, **self.expert_options)
         self._fields: dict[tuple[str, str, tuple[int, ...]], tuple[np.ndarray, np.ndarray]] = {}
-        self._plain: tuple[np.ndarray, np.ndarray] | None = None  # the last steering field and its zone's plain field
+        # The last steering field, its zone's plain field, and each grid cell's nearest cell where that is finite.
+        self._plain: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _field(self, target: str, subset: tuple[int, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
         """Steering field to the (shrunk) zone of ``target``, whose rooms the expert's ``field`` chooses
@@ -127,8 +128,11 @@ class TeacherGoals:
         if self._plain is None or self._plain[0] is not field:
             # The wide-clearance field leaves a door a corridor a window cell's centre can miss:
             # the potential is measured on the house's own grid, to the same zone.
-            self._plain = (field, grid.distance_from(field == 0))
-        plain = self._plain[1]
+            plain = grid.distance_from(field == 0)
+            nearest = scipy.ndimage.distance_transform_edt(~np.isfinite(plain), return_distances=False,
+                                                           return_indices=True)
+            self._plain = (field, plain, nearest)
+        _, plain, nearest = self._plain
         x, y = mapper.window_world(pose)
         metres = np.full(x.shape, np.inf)
         for dx, dy in _SUBCELLS:  # a window cell is as near as the nearest of its parts
@@ -137,7 +141,8 @@ class TeacherGoals:
             inside = (i >= 0) & (i < plain.shape[0]) & (j >= 0) & (j < plain.shape[1])
             metres[inside] = np.minimum(metres[inside], plain[i[inside], j[inside]])
         a, b = grid.to_cell(pose[:2])
-        here = plain[a, b] if np.isfinite(plain[a, b]) else metres[np.isfinite(metres)].min(initial=0.0)
+        # The agent's cell, or (off the free grid) the nearest free one; 0 where no cell reaches the zone.
+        here = plain[nearest[0, a, b], nearest[1, a, b]] if np.isfinite(plain).any() else 0.0
         low, high = POTENTIAL_RANGE
         relative = np.clip(np.nan_to_num(metres - here, posinf=high), low, high)
         return cell, np.round(relative / mapping.CELL).astype(np.int8)
