@@ -94,7 +94,7 @@ def env(tiny_dataset):
 
 
 @pytest.mark.parametrize("name", ["oracle-map", "oracle-map-observable", "oracle-map-furniture", "oracle-map-sensed",
-                                  "oracle-map-potential"])
+                                  "oracle-map-gated", "oracle-map-potential"])
 def test_teacher_goals_lie_in_the_window_and_the_oracle_map_agent_reaches_rooms(env, name):
     agent = registry.make_agent(name, env, seed=0)
     agent.width, agent.height = W, H
@@ -158,6 +158,34 @@ def test_the_sensed_teacher_explores_only_mapped_doors_and_else_looks_around(env
     assert looked and walked
 
 
+def test_the_gated_teacher_takes_the_geodesic_door_once_mapped_and_looks_then_explores_before(env):
+    agent = registry.make_agent("oracle-map", env, seed=0)  # walks the geodesic teacher's goals; the gated one labels
+    agent.width, agent.height = W, H
+    gated, geodesic = goal_teacher.GatedTeacherGoals(env), goal_teacher.TeacherGoals(env)
+    centre = (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2
+    kinds = set()
+    for _ in range(6):
+        ts = env.reset()
+        agent.reset(env.episode.target)
+        while not ts.last():
+            action = agent.step(ts)
+            mapper, pose = agent.driver.mapper, agent.driver.pose
+            looked = gated._looked if gated._episode is env.task.episode else 0
+            label, _ = gated.labels(mapper, pose, potential=False)
+            door = gated.door_out(pose)
+            if gated.memory.target_revealed() or door is None or goal_teacher.door_mapped(mapper, door.center):
+                assert label == geodesic.cell(mapper, pose) and gated._looked == looked
+                kinds.add("geodesic")
+            elif looked < goal_teacher.GATED_LOOK:
+                assert label == centre and gated._looked == looked + 1
+                kinds.add("look")
+            else:
+                assert 0 <= label < mapping.WINDOW ** 2 and gated._looked == looked
+                kinds.add("frontier")
+            ts = env.step(action)
+    assert {"geodesic", "look"} <= kinds
+
+
 def test_the_trainer_labels_with_the_teacher_its_config_names(tiny_dataset, tmp_path):
     config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), teacher="observable")
     shard, = train_goal.training_env.training_houses(config.dataset, None, 0, 1, tmp_path, name="goal")
@@ -165,7 +193,7 @@ def test_the_trainer_labels_with_the_teacher_its_config_names(tiny_dataset, tmp_
     assert len(samples["label"]) == len(samples["maps"]) > 0 and samples["teacher"].all()
     with pytest.raises(ValueError, match="teacher 'map'"):
         train_goal.GoalTrainConfig(teacher="map")
-    assert set(train_goal.TEACHERS) == {"geodesic", "observable", "observable-furniture", "sensed"}
+    assert set(train_goal.TEACHERS) == {"geodesic", "observable", "observable-furniture", "sensed", "gated"}
 
 
 def test_goal_net_shapes_and_errors():

@@ -10,6 +10,8 @@ the observable expert instead, whose choice of door rests only on what the
 episode has shown; :class:`FurnitureTeacherGoals` and :class:`SensedTeacherGoals` (agents
 ``oracle-map-furniture``, ``oracle-map-sensed``) take away, in turn, what the agent cannot sense of
 that: the type of a room seen only by its floor, and the doors it has never had in view.
+:class:`GatedTeacherGoals` (``oracle-map-gated``) keeps the geodesic teacher's choice of door but
+heads for a door only once the agent has mapped it.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import numpy as np
 import scipy.ndimage
 
 from leaps_mj.environment import expert as expert_lib
-from leaps_mj.environment import mapping, observable_expert
+from leaps_mj.environment import frontier, mapping, observable_expert
 from leaps_mj.world import rooms
 
 #: Metres down the geodesic path to the target at which the teacher's goal lies.
@@ -33,6 +35,8 @@ POTENTIAL_RANGE = (-6.0, 8.0)
 DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
 #: Metres from a door's centre within which a mapped lintel counts as the door seen (:class:`SensedTeacherGoals`).
 DOOR_SEEN = 0.5
+#: Goals (steps) a :class:`GatedTeacherGoals` spends looking around on the spot in an episode before it follows frontiers.
+GATED_LOOK = 12
 #: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
 _SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3)
                   for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
@@ -226,3 +230,70 @@ def door_mapped(mapper: mapping.EgoMapper, centre) -> bool:
     row, col = int(rows), int(cols)
     door = mapper.grid[mapping.CHANNELS.index("door")]
     return bool(door[max(0, row - reach):row + reach + 1, max(0, col - reach):col + reach + 1].any())
+
+
+class GatedTeacherGoals(TeacherGoals):
+    """The geodesic teacher's goals, gated by the doors the agent has mapped.
+
+    :class:`TeacherGoals` heads for the door towards the target even where the agent has never had
+    it in view, a goal in unmapped space that a learner cannot read off its map.
+    This teacher keeps that choice of door (the privileged part: which of the doors it has seen
+    leads on) but takes it only once the door is on the agent's map (:func:`door_mapped`); until
+    then it looks around on the spot (its goal the agent's own cell, for up to :data:`GATED_LOOK`
+    steps an episode) and then follows frontiers (:class:`leaps_mj.environment.frontier.FrontierGoals`).
+    Once a room of the target's type has been revealed by its furniture (or stood in:
+    :class:`leaps_mj.environment.observable_expert.ObservableExpert` with ``reveal="furniture"``) its
+    goals are the geodesic teacher's throughout.
+
+    The door it waits for is the one of the room the agent stands in where the steering field is
+    lowest: where the shortest path to the target leaves the room.
+
+    Args:
+      env: The training environment.
+      seed: Seed of the experts (their random moves are not used).
+    """
+
+    def __init__(self, env, seed: int = 0):
+        super().__init__(env, seed)
+        self.memory = observable_expert.ObservableExpert(env, seed=seed, reveal="furniture")
+        self._episode = None
+        self._looked = 0
+        self._frontier = frontier.FrontierGoals()
+
+    def labels(self, mapper: mapping.EgoMapper, pose, potential: bool) -> tuple[int, np.ndarray | None]:
+        task = self.env.task
+        if self._episode is not task.episode:  # a new episode (the trainer does not announce one)
+            self._episode, self._looked = task.episode, 0
+            self._frontier.reset()
+        self.memory.observe()
+        cell, labels = super().labels(mapper, pose, potential)
+        door = self.door_out(pose)
+        if self.memory.target_revealed() or door is None or door_mapped(mapper, door.center):
+            return cell, labels
+        if self._looked < GATED_LOOK:
+            self._looked += 1
+            return (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2, labels
+        return self._frontier.cell(_MapView(mapper, pose)), labels
+
+    def door_out(self, pose):
+        """The door of the room at ``pose`` where the steering field is lowest (None outside any room
+        or in a room without doors)."""
+        hm = self.env.task.house_model
+        room = hm.room_at(pose[:2])
+        field, nearest = self.steering()
+        best, out = np.inf, None
+        for door in hm.house.doors:
+            if room not in door.rooms:
+                continue
+            i, j = hm.grid.to_cell(door.center)
+            value = field[i, j] if np.isfinite(field[i, j]) else field[nearest[0, i, j], nearest[1, i, j]]
+            if value < best:
+                best, out = value, door
+        return out
+
+
+class _MapView:
+    """The two attributes of a driver that :meth:`leaps_mj.environment.frontier.FrontierGoals.cell` reads."""
+
+    def __init__(self, mapper: mapping.EgoMapper, pose):
+        self.mapper, self.pose = mapper, pose

@@ -108,6 +108,7 @@ AGENTS = {
     "oracle-map-observable": AgentSpec("oracle-map-observable", "oracle-map-observable"),
     "oracle-map-furniture": AgentSpec("oracle-map-furniture", "oracle-map-furniture"),
     "oracle-map-sensed": AgentSpec("oracle-map-sensed", "oracle-map-sensed"),
+    "oracle-map-gated": AgentSpec("oracle-map-gated", "oracle-map-gated"),
     "oracle-map-potential": AgentSpec("oracle-map-potential", "oracle-map-potential"),
     "observable": AgentSpec("observable", "observable"),
     "frontier": AgentSpec("frontier", "frontier"),

@@ -50,7 +50,7 @@ from leaps_mj.world import rooms
 HORIZONS = (30, 60)
 #: Agents of the benchmark (names of :data:`leaps_mj.evaluation.harness.AGENTS`).
 AGENTS = ("pure", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable", "oracle-map-furniture",
-          "oracle-map-sensed", "oracle-map-potential", "observable", "frontier", "random")
+          "oracle-map-sensed", "oracle-map-gated", "oracle-map-potential", "observable", "frontier", "random")
 #: Named subsets: episodes per node and door distance (None: all).
 SUBSETS = {"full": None, "smoke": 1}
 #: The label of a run's sub-policy results, the one paired with a baseline's.

@@ -12,7 +12,7 @@ from leaps_mj.planning import agents
 
 #: Agent names accepted by :func:`make_agent`.
 AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable",
-               "oracle-map-furniture", "oracle-map-sensed", "oracle-map-potential", "observable", "frontier",
+               "oracle-map-furniture", "oracle-map-sensed", "oracle-map-gated", "oracle-map-potential", "observable", "frontier",
                "controller", "aug")
 
 
@@ -56,6 +56,8 @@ def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: 
         return agents.FurnitureMapOracleAgent(env, seed)
     if name == "oracle-map-sensed":
         return agents.SensedMapOracleAgent(env, seed)
+    if name == "oracle-map-gated":
+        return agents.GatedMapOracleAgent(env, seed)
     if name == "oracle-map-potential":
         return agents.PotentialMapOracleAgent(env, seed)
     if name == "observable":

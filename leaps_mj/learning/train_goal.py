@@ -56,7 +56,8 @@ from leaps_mj.world import rooms
 
 #: The goal teachers by name (``GoalTrainConfig.teacher``).
 TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals,
-            "observable-furniture": goal_teacher.FurnitureTeacherGoals, "sensed": goal_teacher.SensedTeacherGoals}
+            "observable-furniture": goal_teacher.FurnitureTeacherGoals, "sensed": goal_teacher.SensedTeacherGoals,
+            "gated": goal_teacher.GatedTeacherGoals}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,8 +107,10 @@ class GoalTrainConfig:
       teacher: Whose path the goal labels follow (:data:`TEACHERS`): ``geodesic``
         (:class:`leaps_mj.environment.goal_teacher.TeacherGoals`, straight to the target), ``observable``
         (:class:`leaps_mj.environment.goal_teacher.ObservableTeacherGoals`, exploring until the target's
-        room has been seen), ``observable-furniture`` (the same, rooms seen by their furniture only) or
-        ``sensed`` (that, exploring only the doors the agent has mapped).
+        room has been seen), ``observable-furniture`` (the same, rooms seen by their furniture only),
+        ``sensed`` (that, exploring only the doors the agent has mapped) or ``gated``
+        (:class:`leaps_mj.environment.goal_teacher.GatedTeacherGoals`: the geodesic teacher's door once
+        the agent has mapped it, looking around and frontiers until then).
       method: ``dagger`` (the rounds above) or ``reinforce``: each round the network's goals, sampled
         at ``temperature``, drive every episode, and the network takes a policy-gradient step on
         its goal choices (advantage: the episode's success minus the round's mean success for its

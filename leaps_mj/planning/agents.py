@@ -289,6 +289,14 @@ class SensedMapOracleAgent(MapOracleAgent):
     teacher_class = goal_teacher.SensedTeacherGoals
 
 
+class GatedMapOracleAgent(MapOracleAgent):
+    """The map-goal walk with :class:`leaps_mj.environment.goal_teacher.GatedTeacherGoals`: the
+    geodesic teacher's door, taken only once the agent has mapped it."""
+
+    name = "oracle-map-gated"
+    teacher_class = goal_teacher.GatedTeacherGoals
+
+
 class PotentialMapOracleAgent(MapOracleAgent):
     """The map-goal walk with goals read off the teacher's potential
     (:func:`leaps_mj.environment.goal_teacher.potential_goal` on
