@@ -195,6 +195,32 @@ def test_hop_curve_tool_plots_shipped_results(load_tool, tmp_path, capsys, monke
     assert "ran other episodes" in capsys.readouterr().err
 
 
+def test_hop_ladder_tool_draws_agents_of_committed_results_side_by_side(load_tool, tmp_path, capsys, monkeypatch):
+    """tools/hop_ladder.py reads any agent of committed hop results; it refuses bad specs, absent agents and
+    runs of other episodes."""
+    import pathlib
+
+    tool = load_tool("hop_ladder")
+    out = tmp_path / "ladder.png"
+    monkeypatch.chdir(pathlib.Path(__file__).resolve().parents[1])   # the printed table names the folders as given
+    assert tool.main(["--run", "net=results/hops_shipped_v2_test", "--run",
+                      "sensed=results/hops_oracle_map_sensed_v2_test#oracle-map-sensed", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert out.stat().st_size > 10_000
+    assert "| net (results/hops_shipped_v2_test) | pure | 23.7 | 40.4 | 3.3 | 8.9 |" in printed
+    assert ("| sensed (results/hops_oracle_map_sensed_v2_test) | oracle-map-sensed | 54.8 | 71.5 | 10.4 | 26.3 |"
+            in printed)
+    for bad, message in (("net", "expected LABEL=FOLDER"), ("net=results/no_such_folder", "holds no summary.json"),
+                         ("net=results/hops_shipped_v2_test#frontier", "not a hop benchmark run of agent 'frontier'")):
+        with pytest.raises(SystemExit):
+            tool.main(["--run", bad, "--out", str(out)])
+        assert message in capsys.readouterr().err
+    with pytest.raises(SystemExit):   # test and valid episodes do not share a plot
+        tool.main(["--run", "a=results/hops_shipped_v2_test", "--run", "b=results/hops_shipped_v2_valid",
+                   "--out", str(out)])
+    assert "ran other episodes" in capsys.readouterr().err
+
+
 def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(load_tool, hop_dataset, tmp_path, capsys):
     """tools/hop_visibility.py: groups cover the one-door hops; a target in the first frame is in view on turning;
     folders of other episodes are refused."""

@@ -35,7 +35,7 @@ POTENTIAL_RANGE = (-6.0, 8.0)
 DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
 #: Metres from a door's centre within which a mapped lintel counts as the door seen (:class:`SensedTeacherGoals`).
 DOOR_SEEN = 0.5
-#: Goals (steps) a :class:`GatedTeacherGoals` spends looking around on the spot in an episode before it follows frontiers.
+#: Steps a :class:`GatedTeacherGoals` spends looking around on the spot in an episode before it follows frontiers.
 GATED_LOOK = 12
 #: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
 _SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3)

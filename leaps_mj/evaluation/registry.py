@@ -12,8 +12,8 @@ from leaps_mj.planning import agents
 
 #: Agent names accepted by :func:`make_agent`.
 AGENT_NAMES = ("random", "pure", "leaps", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-map-observable",
-               "oracle-map-furniture", "oracle-map-sensed", "oracle-map-gated", "oracle-map-potential", "observable", "frontier",
-               "controller", "aug")
+               "oracle-map-furniture", "oracle-map-sensed", "oracle-map-gated", "oracle-map-potential", "observable",
+               "frontier", "controller", "aug")
 
 
 def make_agent(name: str, env, subpolicy: agents.SubPolicy | None = None, seed: int = 0, **kwargs) -> agents.Agent:
