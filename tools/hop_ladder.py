@@ -81,7 +81,7 @@ def plot(rows: list[dict], out: pathlib.Path) -> None:
         ax.set_xlabel("success (95% Wilson CI)")
         ax.grid(axis="x", alpha=0.3)
     axes[0].set_yticks(y, [r["label"] for r in rows])
-    axes[-1].legend(fontsize=8, loc="lower right")
+    axes[-1].legend(*axes[0].get_legend_handles_labels(), fontsize=8, loc="lower right")  # with the goal line
     fig.suptitle(f"Hop benchmark ({rows[0]['split']} episodes, n = {rows[0]['rates'][('1', '60')]['n']} per distance)")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
