@@ -186,6 +186,11 @@ class GoalNetConfig:
         Linear layer from the feature vector, as the goal logits) or ``conv`` (transposed convs back
         up the conv stack to half the window's size, each joined by that level's maps, as a U-Net,
         then upsampled: a dense map keeps its walls).
+      goal_head: How the goal logits are read off the features: ``linear`` (one Linear layer from the
+        feature vector to every cell: each cell's weights learned on their own) or ``conv`` (a U-Net
+        decoder as ``decoder`` ``conv``'s, conditioned on the whole feature vector, then one 3x3 conv to a
+        logit per cell: the same weights score every cell, so what makes a door a goal at one place of the
+        window is learned for all of them; session 15).
     """
 
     width: int = 40
@@ -202,6 +207,7 @@ class GoalNetConfig:
     potential: bool = False
     decoder: str = "linear"
     goals: str = "logits"
+    goal_head: str = "linear"
 
     @property
     def input_channels(self) -> int:
@@ -220,6 +226,8 @@ class GoalNetConfig:
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.decoder not in ("linear", "conv"):
             raise ValueError(f"decoder {self.decoder!r}: expected 'linear' or 'conv'")
+        if self.goal_head not in ("linear", "conv"):
+            raise ValueError(f"goal_head {self.goal_head!r}: expected 'linear' or 'conv'")
         if self.goals not in ("logits", "potential"):
             raise ValueError(f"goals {self.goals!r}: expected 'logits' or 'potential'")
         if self.goals == "potential" and not self.potential:

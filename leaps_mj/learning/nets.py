@@ -469,8 +469,10 @@ class GoalNet(_Net):
     logit per map cell, trained with cross-entropy on the cell the geodesic
     path leads to (:mod:`leaps_mj.learning.train_goal`). With ``potential`` a
     second Linear(window ** 2) on the same features predicts each cell's
-    geodesic metres to the target relative to the agent's (:meth:`heads`). One
-    network serves every graph node; the map's ``target`` channel already holds the node's objects.
+    geodesic metres to the target relative to the agent's (:meth:`heads`). With ``goal_head``
+    ``conv`` the goal logits come instead from a U-Net decoder conditioned on the feature vector, one
+    3x3 conv scoring every cell alike. One network serves every graph node; the map's ``target``
+    channel already holds the node's objects.
     """
 
     def __init__(self, config: GoalNetConfig = GoalNetConfig()):
@@ -485,20 +487,41 @@ class GoalNet(_Net):
                                   _layer_init(nn.Linear(in_channels * side * side, config.hidden)), nn.ReLU())
         bits = rooms.NUM_ROOM_TYPES if config.room_bits else 0
         features = config.hidden + config.num_nodes + bits
-        self.out = _layer_init(nn.Linear(features, config.window ** 2), std=0.01)
+        self.out, self.goal_up = None, None
+        if config.goal_head == "linear":
+            self.out = _layer_init(nn.Linear(features, config.window ** 2), std=0.01)
+        else:
+            self.goal_up, width = self._decoder(features)
+            self.out = _layer_init(nn.Conv2d(width, 1, 3, 1, 1), std=0.01)
         self.potential = _layer_init(nn.Linear(features, config.window ** 2), std=0.01) \
             if config.potential and config.decoder == "linear" else None
         self.up = None
         if config.potential and config.decoder == "conv":
-            # From the deepest maps (+ node and bits as planes) up to half the window, each level joined by the
-            # encoder's maps of its size, then upsampled (full size costs this machine 3x the learner's time).
-            widths = [16 * 2 ** k for k in reversed(range(len(config.channels) - 1))]
-            layers, in_channels = [], config.channels[-1] + config.num_nodes + bits
-            for width, skip in zip(widths, reversed(config.channels[:-1])):
-                layers.append(_layer_init(nn.ConvTranspose2d(in_channels, width, 4, 2, 1)))
-                in_channels = width + skip
-            self.up = nn.ModuleList(layers)
-            self.potential = _layer_init(nn.Conv2d(in_channels, 1, 3, 1, 1), std=0.01)
+            self.up, width = self._decoder(config.num_nodes + bits)
+            self.potential = _layer_init(nn.Conv2d(width, 1, 3, 1, 1), std=0.01)
+
+    def _decoder(self, condition: int) -> tuple[nn.ModuleList, int]:
+        """A U-Net decoder from the deepest maps (+ ``condition`` features as planes) up to half the window,
+        each level joined by the encoder's maps of its size (full size costs this machine 3x the learner's
+        time; the heads upsample), and the channels it ends with."""
+        channels = self.config.channels
+        widths = [16 * 2 ** k for k in reversed(range(len(channels) - 1))]
+        layers, in_channels = [], channels[-1] + condition
+        for width, skip in zip(widths, reversed(channels[:-1])):
+            layers.append(_layer_init(nn.ConvTranspose2d(in_channels, width, 4, 2, 1)))
+            in_channels = width + skip
+        return nn.ModuleList(layers), in_channels
+
+    @staticmethod
+    def _decode(up: nn.ModuleList, head: nn.Module, levels: list[torch.Tensor], condition: torch.Tensor,
+                size) -> torch.Tensor:
+        """One value per window cell (B, window ** 2): the decoder ``up`` from the encoder's ``levels``
+        (input first) with ``condition`` (B, C) as planes at the deepest, ``head``, then upsampled to ``size``."""
+        deepest = levels[-1]
+        x = torch.cat([deepest, condition[:, :, None, None].expand(-1, -1, *deepest.shape[-2:])], dim=1)
+        for layer, skip in zip(up, reversed(levels[1:-1])):
+            x = torch.cat([F.relu(layer(x)), skip], dim=1)
+        return F.interpolate(head(x), size=size, mode="bilinear", align_corners=False).flatten(1)
 
     def forward(self, egomap: torch.Tensor, node: torch.Tensor, bits: torch.Tensor | None = None) -> torch.Tensor:
         """Goal logits (B, window ** 2), row-major over the window, from maps (B, C, window, window)
@@ -543,15 +566,16 @@ class GoalNet(_Net):
                                  f"{rooms.NUM_ROOM_TYPES})")
             inputs.append(bits.float())
         features = torch.cat(inputs, dim=1)
-        if self.up is None:
-            return self.out(features), self.potential(features) if self.potential is not None else None
-        deepest = levels.pop()
-        condition = features[:, cfg.hidden:, None, None].expand(-1, -1, *deepest.shape[-2:])
-        x = torch.cat([deepest, condition], dim=1)
-        for layer, skip in zip(self.up, reversed(levels[1:])):
-            x = torch.cat([F.relu(layer(x)), skip], dim=1)
-        potential = F.interpolate(self.potential(x), size=egomap.shape[-2:], mode="bilinear", align_corners=False)
-        return self.out(features), potential.flatten(1)
+        size = egomap.shape[-2:]
+        if self.goal_up is None:
+            logits = self.out(features)
+        else:
+            logits = self._decode(self.goal_up, self.out, levels, features, size)
+        if self.up is not None:
+            potential = self._decode(self.up, self.potential, levels, features[:, cfg.hidden:], size)
+        else:
+            potential = self.potential(features) if self.potential is not None else None
+        return logits, potential
 
 
 _NETS = {

@@ -102,6 +102,8 @@ class GoalTrainConfig:
         (0, 1) with that quantile's pinball loss (below 0.5: optimistic — a way that *may* lead on
         scores low even where another may too; see :func:`potential_loss`).
       decoder: The potential head's decoder (``nets.GoalNetConfig.decoder``: ``linear`` or ``conv``).
+      goal_head: How the goal logits are read off the features (``nets.GoalNetConfig.goal_head``:
+        ``linear``, each cell's own weights, or ``conv``, one convolution scoring every cell alike).
       goals: What the network's goals are picked from (``nets.GoalNetConfig.goals``: ``logits`` or
         ``potential``), when it drives the training episodes and as the sub-policy.
       teacher: Whose path the goal labels follow (:data:`TEACHERS`): ``geodesic``
@@ -153,6 +155,7 @@ class GoalTrainConfig:
     potential_quantile: float = 0.5
     decoder: str = "linear"
     goals: str = "logits"
+    goal_head: str = "linear"
     teacher: str = "geodesic"
     method: str = "dagger"
     init_from: str = ""
@@ -169,7 +172,7 @@ class GoalTrainConfig:
         """The architecture of the network this run trains."""
         return nets.GoalNetConfig(width=self.width, height=self.height, context=self.context, cues=self.cues,
                                  semantic=self.semantic, room_bits=self.room_bits, potential=self.potential,
-                                 decoder=self.decoder, goals=self.goals)
+                                 decoder=self.decoder, goals=self.goals, goal_head=self.goal_head)
 
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
@@ -183,6 +186,8 @@ class GoalTrainConfig:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")
         if self.teacher not in TEACHERS:
             raise ValueError(f"teacher {self.teacher!r}: expected one of {sorted(TEACHERS)}")
+        if self.goal_head not in ("linear", "conv"):
+            raise ValueError(f"goal_head {self.goal_head!r}: expected 'linear' or 'conv'")
         if self.method not in ("dagger", "reinforce"):
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
         if not 0.0 <= self.beta <= 1.0:
