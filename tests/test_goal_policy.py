@@ -496,6 +496,34 @@ def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(ti
     env.close()
 
 
+def test_a_conv_goal_head_scores_every_cell_with_the_same_weights(tiny_dataset, tmp_path):
+    with pytest.raises(ValueError, match="goal_head 'deconv'"):
+        nets.GoalNetConfig(goal_head="deconv")
+    with pytest.raises(ValueError, match="goal_head 'deconv'"):
+        train_goal.GoalTrainConfig(goal_head="deconv")
+    torch.manual_seed(0)
+    config = nets.GoalNetConfig(width=W, height=H, goal_head="conv", potential=True, decoder="conv")
+    net = nets.GoalNet(config)
+    assert isinstance(net.out, torch.nn.Conv2d) and net.out.weight.numel() < 1000  # not one weight row per cell
+    maps = torch.zeros(2, config.input_channels, mapping.WINDOW, mapping.WINDOW)
+    maps[0, mapping.CHANNELS.index("door"), 4:6, 4:6] = 1
+    logits, potential = net.heads(maps, torch.tensor([0, 3]))
+    assert logits.shape == potential.shape == (2, mapping.WINDOW ** 2)
+    # The same door placed elsewhere moves where the logits change: the head reads the map where it lies.
+    shifted = torch.zeros_like(maps[:1])
+    shifted[0, mapping.CHANNELS.index("door"), 20:22, 20:22] = 1
+    blank = net(torch.zeros_like(maps[:1]), torch.tensor([0]))
+    change = (net(maps[:1], torch.tensor([0])) - blank).abs().reshape(mapping.WINDOW, mapping.WINDOW)
+    change2 = (net(shifted, torch.tensor([0])) - blank).abs().reshape(mapping.WINDOW, mapping.WINDOW)
+    assert change[:12, :12].sum() > change[20:, 20:].sum() and change2[14:, 14:].sum() > change2[:8, :8].sum()
+    # It trains and acts as the sub-policy like the linear head (the tiny preset: seconds).
+    run = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), goal_head="conv")
+    trainer = train_goal.GoalTrainer(run, tmp_path / "run", progress=False)
+    trainer.train()
+    policy = goal_policy.GoalSubPolicy(tmp_path / "run")
+    assert policy.net.config.goal_head == "conv"
+
+
 def test_a_network_with_a_potential_head_descends_it_to_its_goal(env):
     config = nets.GoalNetConfig(width=W, height=H, potential=True, goals="potential")
     net = nets.GoalNet(config)
