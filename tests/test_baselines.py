@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from leaps_mj.learning import baselines, nets, train_controller
+from leaps_mj.learning import baselines, checkpoints, nets, train_controller
 from leaps_mj.world import rooms
 
 K = rooms.NUM_ROOM_TYPES
@@ -115,13 +115,13 @@ def test_augmented_agent_runs_mu_s_on_the_whole_timestep():
 
 def test_controller_checkpoint_round_trip(tmp_path):
     net = fixed_choice_net("garage")
-    nets.save_checkpoint(tmp_path / "c.pt", net, net.config, {"option_steps": 7, "subpolicy": "local"})
+    checkpoints.save_checkpoint(tmp_path / "c.pt", net, net.config, {"option_steps": 7, "subpolicy": "local"})
     agent = baselines.ControllerAgent.from_checkpoint(FakeSubPolicy(), tmp_path / "c.pt", greedy=True)
     assert agent.option_steps == 7
     agent.reset("outdoor")
     agent.step(timestep())
     assert agent.info()["subtarget"] == "garage"
-    nets.save_checkpoint(tmp_path / "bare.pt", net, net.config)
+    checkpoints.save_checkpoint(tmp_path / "bare.pt", net, net.config)
     with pytest.raises(ValueError, match="not a controller checkpoint"):
         baselines.load_controller(tmp_path / "bare.pt")
     with pytest.raises(ValueError, match="no controller checkpoint"):
@@ -197,7 +197,7 @@ def test_a_policy_folder_brings_its_own_controller(tmp_path):
     assert policy_folder.controller_path(None) == baselines.DEFAULT_CONTROLLER
     assert policy_folder.controller_path(tmp_path) == baselines.DEFAULT_CONTROLLER  # none of its own
     net = fixed_choice_net("garage")
-    nets.save_checkpoint(tmp_path / policy_folder.CONTROLLER, net, net.config, {"option_steps": 5, "subpolicy": "learned"})
+    checkpoints.save_checkpoint(tmp_path / policy_folder.CONTROLLER, net, net.config, {"option_steps": 5, "subpolicy": "learned"})
     assert policy_folder.controller_path(tmp_path) == tmp_path / policy_folder.CONTROLLER
     agent = registry.make_agent("controller", None, subpolicy=FakeSubPolicy(),
                                 controller=policy_folder.controller_path(tmp_path))

@@ -198,11 +198,11 @@ def test_main_runs_leaps_over_a_map_goal_sub_policy_from_policy_dir(tiny_dataset
     """--policy-dir with a goal.pt drives LEAPS and pure with the map-goal sub-policy; a temperature is refused."""
     import torch
 
-    from leaps_mj.learning import goal_policy, nets
+    from leaps_mj.learning import checkpoints, goal_policy, nets
 
     torch.manual_seed(0)
     config = nets.GoalNetConfig(width=24, height=18)
-    nets.save_checkpoint(tmp_path / "goal" / goal_policy.GOAL, nets.GoalNet(config), config, {})
+    checkpoints.save_checkpoint(tmp_path / "goal" / goal_policy.GOAL, nets.GoalNet(config), config, {})
     argv = ["--agent", "pure", "leaps", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "20",
             "--subpolicy", "learned", "--policy-dir", str(tmp_path / "goal"), "--limit", "2", "--no-progress"]
     assert evaluate.main(argv + ["--out", str(tmp_path / "eval")]) == 0

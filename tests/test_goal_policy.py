@@ -10,7 +10,7 @@ import torch
 import leaps_mj
 from leaps_mj.environment import expert, goal_teacher, map_navigation, mapping
 from leaps_mj.evaluation import registry
-from leaps_mj.learning import goal_policy, nets, train_goal
+from leaps_mj.learning import checkpoints, goal_policy, nets, train_goal
 from leaps_mj.world import rooms
 
 W, H = 24, 18
@@ -211,7 +211,7 @@ def test_goal_net_shapes_and_errors():
 def test_goal_sub_policy_loads_acts_and_refuses_other_checkpoints(tmp_path, env):
     torch.manual_seed(0)
     config = nets.GoalNetConfig(width=W, height=H)
-    nets.save_checkpoint(tmp_path / goal_policy.GOAL, nets.GoalNet(config), config, {})
+    checkpoints.save_checkpoint(tmp_path / goal_policy.GOAL, nets.GoalNet(config), config, {})
     policy = goal_policy.GoalSubPolicy(tmp_path)
     assert policy.targets == rooms.GRAPH_NODES
     with pytest.raises(ValueError, match="reset"):
@@ -233,7 +233,7 @@ def test_goal_sub_policy_loads_acts_and_refuses_other_checkpoints(tmp_path, env)
     first = run()
     assert all(0 <= a < rooms.NUM_ACTIONS for a in first) and run() == first
     pixel = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16)
-    nets.save_checkpoint(tmp_path / "other" / goal_policy.GOAL, nets.ActorCritic(pixel), pixel, {})
+    checkpoints.save_checkpoint(tmp_path / "other" / goal_policy.GOAL, nets.ActorCritic(pixel), pixel, {})
     with pytest.raises(ValueError, match="not a map-goal network"):
         goal_policy.GoalSubPolicy(tmp_path / "other")
     with pytest.raises(ValueError, match="train one with"):

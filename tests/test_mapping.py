@@ -9,7 +9,7 @@ import torch
 
 import leaps_mj
 from leaps_mj.environment import mapping
-from leaps_mj.learning import nets, policies, training_env
+from leaps_mj.learning import checkpoints, nets, policies, training_env
 from leaps_mj.learning.policy_config import PRESETS
 from leaps_mj.world import rooms
 
@@ -108,7 +108,7 @@ def test_training_env_and_sub_policy_build_the_same_maps(tiny_dataset, tmp_path)
     config = dataclasses.replace(PRESETS["tiny"], dataset=str(tiny_dataset), width=W, height=H, map_input=True)
     torch.manual_seed(0)
     net_config = config.policy_config()
-    nets.save_checkpoint(tmp_path / "kitchen.pt", nets.ActorCritic(net_config), net_config, {"target": "kitchen"})
+    checkpoints.save_checkpoint(tmp_path / "kitchen.pt", nets.ActorCritic(net_config), net_config, {"target": "kitchen"})
     policy = policies.LearnedSubPolicy(tmp_path, targets=("kitchen",))
     seen = []
     net = policy.nets["kitchen"]

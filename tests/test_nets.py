@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints, nets
 from leaps_mj.world import rooms
 
 W, H = 40, 30
@@ -191,10 +191,10 @@ def test_controller_shapes_and_parameter_count():
     ids=lambda c: type(c).__name__,
 )
 def test_checkpoint_round_trip(tmp_path, config):
-    model = nets._NETS[type(config).__name__][1](config).eval()
+    model = checkpoints._NETS[type(config).__name__][1](config).eval()
     path = tmp_path / "sub" / "ckpt.pt"
-    nets.save_checkpoint(path, model, config, {"step": 7, "target": "kitchen", "curve": [1.0, 2.0]})
-    loaded, loaded_config, extra = nets.load_policy(path, expect_width=W, expect_height=H)
+    checkpoints.save_checkpoint(path, model, config, {"step": 7, "target": "kitchen", "curve": [1.0, 2.0]})
+    loaded, loaded_config, extra = checkpoints.load_policy(path, expect_width=W, expect_height=H)
     assert loaded_config == config and extra == {"step": 7, "target": "kitchen", "curve": [1.0, 2.0]}
     assert [p.name for p in path.parent.iterdir()] == ["ckpt.pt"]  # no temp file left behind
     with torch.no_grad():
@@ -215,44 +215,44 @@ def test_checkpoint_round_trip(tmp_path, config):
 def test_load_rejects_wrong_resolution(tmp_path):
     path = tmp_path / "policy.pt"
     model = small_policy()
-    nets.save_checkpoint(path, model, model.config, {})
+    checkpoints.save_checkpoint(path, model, model.config, {})
     with pytest.raises(ValueError, match="40x30") as info:
-        nets.load_policy(path, expect_width=64, expect_height=48)
+        checkpoints.load_policy(path, expect_width=64, expect_height=48)
     assert "64x48" in str(info.value) and "policy.pt" in str(info.value)
 
 
 def test_load_rejects_other_class_table(tmp_path):
     path = tmp_path / "policy.pt"
     model = small_policy()
-    nets.save_checkpoint(path, model, model.config, {})
+    checkpoints.save_checkpoint(path, model, model.config, {})
     payload = torch.load(path, weights_only=True)
     payload["seg_classes"] = payload["seg_classes"][:-1]
     torch.save(payload, path)
     with pytest.raises(ValueError, match="segmentation classes"):
-        nets.load_policy(path)
+        checkpoints.load_policy(path)
 
 
 def test_load_rejects_missing_and_corrupt_files(tmp_path):
     with pytest.raises(ValueError, match="nothing.pt"):
-        nets.load_policy(tmp_path / "nothing.pt")
+        checkpoints.load_policy(tmp_path / "nothing.pt")
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(b"not a checkpoint at all")
     with pytest.raises(ValueError, match="garbage.pt"):
-        nets.load_policy(garbage)
+        checkpoints.load_policy(garbage)
     path = tmp_path / "truncated.pt"
     model = small_policy()
-    nets.save_checkpoint(path, model, model.config, {})
+    checkpoints.save_checkpoint(path, model, model.config, {})
     path.write_bytes(path.read_bytes()[:1000])
     with pytest.raises(ValueError, match="truncated.pt"):
-        nets.load_policy(path)
+        checkpoints.load_policy(path)
 
 
 def test_save_rejects_bad_arguments(tmp_path):
     model = small_policy()
     with pytest.raises(ValueError, match=r"extra\['arr'\]"):
-        nets.save_checkpoint(tmp_path / "a.pt", model, model.config, {"arr": np.zeros(3)})
+        checkpoints.save_checkpoint(tmp_path / "a.pt", model, model.config, {"arr": np.zeros(3)})
     with pytest.raises(ValueError, match="differs"):
-        nets.save_checkpoint(tmp_path / "a.pt", model, nets.PolicyConfig(**{**SMALL, "hidden": 64}), {})
+        checkpoints.save_checkpoint(tmp_path / "a.pt", model, nets.PolicyConfig(**{**SMALL, "hidden": 64}), {})
     assert not list(tmp_path.iterdir())
 
 

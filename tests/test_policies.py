@@ -5,7 +5,7 @@ import pytest
 import torch
 
 import leaps_mj
-from leaps_mj.learning import nets, policies
+from leaps_mj.learning import checkpoints, nets, policies
 from leaps_mj.planning import agents
 from leaps_mj.world import rooms
 
@@ -19,7 +19,7 @@ def folder(tmp_path_factory):
     torch.manual_seed(0)
     for target in ("kitchen", "bedroom"):
         config = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16)
-        nets.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
+        checkpoints.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
     return out
 
 
@@ -172,7 +172,7 @@ def aug_folder(tmp_path_factory):
     torch.manual_seed(1)
     for target in ("kitchen", "bedroom"):
         config = nets.PolicyConfig(width=W, height=H, conv_channels=(8, 8), hidden=16, lstm=16, use_semantic=True)
-        nets.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
+        checkpoints.save_checkpoint(out / f"{target}.pt", nets.ActorCritic(config), config, {"target": target})
     return out
 
 

@@ -17,7 +17,7 @@ import torch
 ray = pytest.importorskip("ray")
 
 
-from leaps_mj.learning import nets, policy_eval, ray_rollouts, rollouts, train_policy, trainer
+from leaps_mj.learning import checkpoints, nets, policy_eval, ray_rollouts, rollouts, train_policy, trainer
 from leaps_mj.world import rooms
 
 #: Seconds any single wait on Ray may take in these tests.
@@ -139,7 +139,7 @@ def test_a_killed_actor_is_replaced_and_training_goes_on(ray_run):
 
 def test_a_stopped_ray_run_resumes_and_its_checkpoint_fits_either_backend(ray_run):
     config, out, _, _, stopped = ray_run
-    _, _, extra = nets.load_policy(stopped, config.width, config.height)
+    _, _, extra = checkpoints.load_policy(stopped, config.width, config.height)
     assert extra["iteration"] == 4 and extra["train_config"] == trainer.plain(dataclasses.asdict(config))
     log = policy_eval.read_progress(out / "kitchen" / "progress.csv")
     assert list(log["iteration"]) == [1, 2, 3, 4, 5, 6] and list(log["phase"]) == ["dagger"] * 4 + ["a2c"] * 2
@@ -149,7 +149,7 @@ def test_a_stopped_ray_run_resumes_and_its_checkpoint_fits_either_backend(ray_ru
 
 def test_a_ray_run_ends_with_a_loadable_evaluated_policy(ray_run):
     config, out, _, _, _ = ray_run
-    _, pconfig, extra = nets.load_policy(out / "kitchen.pt", config.width, config.height)
+    _, pconfig, extra = checkpoints.load_policy(out / "kitchen.pt", config.width, config.height)
     assert pconfig == config.policy_config() and extra["iteration"] == 6
     assert set(extra["eval"]) == {"train/sampled", "train/greedy", "valid/sampled", "valid/greedy"}
 
@@ -158,7 +158,7 @@ def _fingerprint(out) -> tuple:
     """A finished run's logged scalars (timings aside) and final weights."""
     log = policy_eval.read_progress(out / "kitchen" / "progress.csv")
     scalars = {k: list(map(str, v)) for k, v in log.items() if not k.endswith("_seconds") and k != "SPS"}
-    model, _, _ = nets.load_policy(out / "kitchen.pt")
+    model, _, _ = checkpoints.load_policy(out / "kitchen.pt")
     return scalars, {k: v.numpy().tobytes() for k, v in model.state_dict().items()}
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from leaps_mj.learning import losses, nets, policy_eval, train_policy
+from leaps_mj.learning import checkpoints, losses, nets, policy_eval, train_policy
 
 
 def tiny(dataset, **overrides):
@@ -109,7 +109,7 @@ def resumed_run(tiny_dataset, tmp_path_factory):
     killed = train_policy.Trainer(config, "kitchen", out, progress=False)
     assert killed.iteration == 3
     # A kill after iteration 3 was logged but before its checkpoint: the state says 2.
-    nets.save_checkpoint(killed.state_path, killed.model, killed.model.config,
+    checkpoints.save_checkpoint(killed.state_path, killed.model, killed.model.config,
                          {**killed.extra(), "iteration": 2, "global_step": 2 * config.batch,
                           "optimizer": killed.optimizer.state_dict()})
     loaded = train_policy.Trainer(config, "kitchen", out, progress=False)
@@ -142,7 +142,7 @@ def test_training_losses_are_finite_in_both_phases(resumed_run):
 
 def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
     config, out, _, _ = resumed_run
-    _, pconfig, extra = nets.load_policy(out / "kitchen.pt", config.width, config.height)
+    _, pconfig, extra = checkpoints.load_policy(out / "kitchen.pt", config.width, config.height)
     assert pconfig == config.policy_config() and extra["iteration"] == 6 and extra["target"] == "kitchen"
     assert set(extra["eval"]) == {"train/sampled", "train/greedy", "valid/sampled", "valid/greedy"}
     assert all(0.0 <= r["success_rate"] <= 1.0 and r["episodes"] == config.eval_episodes
@@ -153,7 +153,7 @@ def test_the_run_leaves_a_loadable_evaluated_policy_and_curves(resumed_run):
 def test_init_from_starts_a_new_run_from_another_runs_weights(resumed_run, tmp_path):
     """A new run (e.g. A2C fine-tuning) starts from the given policy's weights; a resume keeps its own."""
     config, out, _, _ = resumed_run
-    shipped, _, _ = nets.load_policy(out / "kitchen.pt")
+    shipped, _, _ = checkpoints.load_policy(out / "kitchen.pt")
     fine = dataclasses.replace(config, method="a2c", init_from=str(out / "kitchen.pt"), lr=1e-4)
     trainer = train_policy.Trainer(fine, "kitchen", tmp_path, progress=False)
     assert all(torch.equal(a, b) for a, b in zip(shipped.state_dict().values(), trainer.model.state_dict().values()))

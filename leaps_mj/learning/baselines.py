@@ -26,7 +26,7 @@ import pathlib
 import numpy as np
 import torch
 
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints, nets
 from leaps_mj.planning import agents
 from leaps_mj.world import rooms
 
@@ -184,7 +184,7 @@ def load_controller(path: str | os.PathLike = DEFAULT_CONTROLLER) -> tuple[nets.
     if not path.is_file():
         hint = f"; train it with `{TRAIN_COMMAND}`" if path == DEFAULT_CONTROLLER else ""
         raise ValueError(f"no controller checkpoint {str(path)!r}{hint}")
-    net, _, extra = nets.load_policy(path)
+    net, _, extra = checkpoints.load_policy(path)
     if not isinstance(net, nets.ControllerNet) or "option_steps" not in extra:
         raise ValueError(f"{path} is not a controller checkpoint of `python -m leaps_mj.train controller`")
     return net, extra

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from leaps_mj.environment import roomnav as env_lib
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints, nets
 from leaps_mj.world import rooms
 
 #: Probability a bit needs (paper: 0.85) ...
@@ -160,7 +160,7 @@ class RoomTypeClassifier:
         if not path.is_file():
             hint = f"; train it with `{TRAIN_COMMAND}`" if path == DEFAULT_PATH else ""
             raise ValueError(f"no classifier checkpoint {str(path)!r}{hint}")
-        model, _, _ = nets.load_policy(path)
+        model, _, _ = checkpoints.load_policy(path)
         return cls(model)
 
     @torch.no_grad()

@@ -34,7 +34,7 @@ import pathlib
 import torch
 
 from leaps_mj.environment import goal_teacher, map_navigation, mapping
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints, nets
 from leaps_mj.world import rooms
 
 #: File name of the map-goal network in a policy folder.
@@ -77,7 +77,7 @@ def load_goal_net(path: str | os.PathLike, width: int | None = None,
     path = pathlib.Path(path)
     if not path.is_file():
         raise ValueError(f"no map-goal network at {path}; train one with `python -m leaps_mj.train goal`")
-    model, _, extra = nets.load_policy(path, width, height)
+    model, _, extra = checkpoints.load_policy(path, width, height)
     if not isinstance(model, nets.GoalNet):
         raise ValueError(f"{path} holds a {type(model).__name__}, not a map-goal network (GoalNet)")
     if model.config.map_channels != len(mapping.CHANNELS) or model.config.window != mapping.WINDOW:

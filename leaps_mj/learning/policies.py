@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from leaps_mj.environment import mapping, render
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints, nets
 from leaps_mj.world import rooms
 
 #: File name (without ``.pt``) of one network shared by every graph node.
@@ -99,7 +99,7 @@ class LearnedSubPolicy:
             rooms.room_index(target)
             path = checkpoint_path(folder, target)
             if path not in loaded:
-                loaded[path] = nets.load_policy(path, width, height)
+                loaded[path] = checkpoints.load_policy(path, width, height)
             model, config, extra = loaded[path]
             if not isinstance(model, nets.ActorCritic) or config.use_semantic != use_semantic:
                 kind = "semantic-augmented policy (μ_s)" if use_semantic else "pixel-only sub-policy"
@@ -191,7 +191,7 @@ def folder_targets(folder: str | os.PathLike) -> tuple[str, ...]:
     """The graph nodes a folder of checkpoints serves (own files, or all of a shared network's targets)."""
     folder = pathlib.Path(folder)
     shared = folder / f"{SHARED}.pt"
-    served = set(nets.load_policy(shared)[2].get("targets", rooms.GRAPH_NODES)) if shared.is_file() else set()
+    served = set(checkpoints.load_policy(shared)[2].get("targets", rooms.GRAPH_NODES)) if shared.is_file() else set()
     return tuple(t for t in rooms.GRAPH_NODES if (folder / f"{t}.pt").is_file() or t in served)
 
 

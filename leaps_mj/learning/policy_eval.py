@@ -15,7 +15,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from leaps_mj.environment import roomnav
-from leaps_mj.learning import nets
+from leaps_mj.learning import checkpoints
 from leaps_mj.learning.policy_config import TrainConfig
 
 
@@ -130,7 +130,7 @@ def plot_comparison(runs: dict[str, str | os.PathLike], target: str, path: str |
     fig, ax = plt.subplots(figsize=(6.5, 3.8))
     for i, (label, folder) in enumerate(runs.items()):
         log = read_progress(pathlib.Path(folder) / target / "progress.csv")
-        _, _, extra = nets.load_policy(pathlib.Path(folder) / f"{target}.pt")
+        _, _, extra = checkpoints.load_policy(pathlib.Path(folder) / f"{target}.pt")
         valid = (extra.get("eval") or {}).get("valid/sampled", {}).get("success_rate")
         suffix = f" (valid eval {valid:.2f})" if valid is not None else ""
         ax.plot(log["global_step"] / 1000, log["success_rate"], color=f"C{i}", label=label + suffix)

@@ -52,7 +52,7 @@ import tqdm
 
 from leaps_mj.environment import roomnav
 from leaps_mj.environment.roomnav import EpisodeSpec
-from leaps_mj.learning import classifier, nets
+from leaps_mj.learning import checkpoints, classifier, nets
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import houses, rooms
@@ -348,7 +348,7 @@ class Trainer(trainer_lib.Trainer):
         self.history.append({"epoch": epoch, **row})
         if self.best is None or result["accuracy"] > self.best["accuracy"]:
             self.best = {**result, "epoch": epoch}
-            nets.save_checkpoint(self.best_path, self.model, self.model.config,
+            checkpoints.save_checkpoint(self.best_path, self.model, self.model.config,
                                  {**self.extra(), "epoch": epoch})
         print(f"epoch {epoch}: train loss {row['train_loss']:.3f}, valid accuracy "
               f"{result['accuracy']:.3f} (best {self.best['accuracy']:.3f} at epoch {self.best['epoch']})",

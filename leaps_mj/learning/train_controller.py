@@ -54,7 +54,7 @@ import torch
 import tqdm
 
 from leaps_mj.environment import episodes, roomnav
-from leaps_mj.learning import backend_options, baselines, nets
+from leaps_mj.learning import backend_options, baselines, checkpoints, nets
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.planning import agents
 from leaps_mj.world import dataset as dataset_lib
@@ -276,7 +276,7 @@ class Trainer(trainer_lib.Trainer):
         self.history, self.eval = extra["history"], extra["eval"]
 
     def publish(self, extra: dict) -> None:
-        nets.save_checkpoint(self.policy_path, self.net, self.net.config, extra)
+        checkpoints.save_checkpoint(self.policy_path, self.net, self.net.config, extra)
 
     def log_step(self, row: dict) -> int:
         return row["episodes"]

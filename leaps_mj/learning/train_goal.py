@@ -48,7 +48,7 @@ import torch
 import torch.nn.functional as F
 
 from leaps_mj.environment import goal_teacher, map_navigation, mapping, roomnav
-from leaps_mj.learning import goal_policy, nets, training_env
+from leaps_mj.learning import checkpoints, goal_policy, nets, training_env
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import rooms
@@ -521,7 +521,7 @@ class GoalTrainer(trainer_lib.Trainer):
         return {"learner": f"{row['learner_success']:.2f}", "acc": f"{row['accuracy']:.2f}"}
 
     def publish(self, extra: dict) -> None:
-        nets.save_checkpoint(self.out / goal_policy.GOAL, self.model, self.model.config, extra)
+        checkpoints.save_checkpoint(self.out / goal_policy.GOAL, self.model, self.model.config, extra)
 
 
 def plot_curves(progress: pathlib.Path, out: pathlib.Path) -> pathlib.Path:

@@ -70,7 +70,7 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from leaps_mj.learning import backend_options, nets, policies, rollouts
+from leaps_mj.learning import backend_options, checkpoints, nets, policies, rollouts
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.learning.losses import a2c_loss, aux_loss, bc_loss, masked_mean
 from leaps_mj.learning.policy_config import PRESETS, TrainConfig
@@ -151,7 +151,7 @@ class Trainer(trainer_lib.Trainer):
         """
         if pathlib.Path(path).is_dir():
             path = policies.checkpoint_path(path, self.target)
-        model, config, _ = nets.load_policy(path, self.config.width, self.config.height)
+        model, config, _ = checkpoints.load_policy(path, self.config.width, self.config.height)
         if config != self.model.config:
             raise ValueError(f"init_from {path}: holds a network {config}, expected this run's {self.model.config}")
         self.model.load_state_dict(model.state_dict())
@@ -171,7 +171,7 @@ class Trainer(trainer_lib.Trainer):
         self.global_step, self.eval = extra["global_step"], extra.get("eval")
 
     def publish(self, extra: dict[str, Any]) -> None:
-        nets.save_checkpoint(self.policy_path, self.model, self.model.config, extra)
+        checkpoints.save_checkpoint(self.policy_path, self.model, self.model.config, extra)
 
     def hyperparameters(self) -> dict[str, Any]:
         return {**dataclasses.asdict(self.config), "target": self.target}

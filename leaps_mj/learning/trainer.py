@@ -17,7 +17,7 @@ holds besides the counters) and optionally :meth:`Trainer.session` (what
 lives across iterations, e.g. worker processes) and :meth:`Trainer.publish`
 (the files it ships, e.g. the policy). Trainers with a network set
 ``model`` and ``optimizer`` and the checkpoint is a
-:func:`leaps_mj.learning.nets.save_checkpoint` file; those without one (the
+:func:`leaps_mj.learning.checkpoints.save_checkpoint` file; those without one (the
 prior's exploration counts) write JSON.
 """
 
@@ -232,9 +232,9 @@ class Trainer:
         if not self.state_path.exists():
             return False
         if self.model is not None:
-            from leaps_mj.learning import nets
+            from leaps_mj.learning import checkpoints
 
-            model, _, extra = nets.load_policy(self.state_path, expect_width, expect_height)
+            model, _, extra = checkpoints.load_policy(self.state_path, expect_width, expect_height)
             check_same_config(self.state_path, extra["train_config"], self.config, self.growable)
             self.model.load_state_dict(model.state_dict())
             if self.optimizer is not None:
@@ -253,12 +253,12 @@ class Trainer:
         """Writes the checkpoint (atomically), then the shipped files."""
         extra = self.extra()
         if self.model is not None:
-            from leaps_mj.learning import nets
+            from leaps_mj.learning import checkpoints
 
             state = {**extra, "optimizer": self.optimizer.state_dict()} if self.optimizer is not None else extra
             device = next(self.model.parameters()).device
             model = self.model.to("cpu")
-            nets.save_checkpoint(self.state_path, model, model.config, state)
+            checkpoints.save_checkpoint(self.state_path, model, model.config, state)
             self.model.to(device)
         else:
             dataset_lib.write_atomic(self.state_path, (json.dumps(extra) + "\n").encode())
