@@ -81,7 +81,7 @@ def main(argv=None) -> int:
         outputs = []
         with torch.no_grad():
             for start in range(0, len(truth), 1024):
-                maps = train_goal._unpack(data["maps"][start:start + 1024], net.config.input_channels)
+                maps = train_goal.unpack_maps(data["maps"][start:start + 1024], net.config.input_channels)
                 bits = torch.as_tensor(data["bits"][start:start + 1024]) if net.config.room_bits else None
                 outputs.append(net.heads(maps, torch.as_tensor(data["node"][start:start + 1024]), bits)[1].numpy())
         predicted[label] = np.concatenate(outputs)
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
                              squeeze=False)
     channels = mapping.CHANNELS
     for k, i in enumerate(chosen):
-        window = train_goal._unpack(data["maps"][i:i + 1], len(channels))[0].numpy()
+        window = train_goal.unpack_maps(data["maps"][i:i + 1], len(channels))[0].numpy()
         shade = (2 * window[channels.index("obstacle")] + window[channels.index("floor")]
                  + 3 * window[channels.index("door")])
         axes[0, k].imshow(shade, cmap="gray")

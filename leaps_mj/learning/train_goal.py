@@ -349,8 +349,8 @@ def rotate(maps: torch.Tensor, labels: torch.Tensor, turns: torch.Tensor) -> tup
     return out_maps, out_labels
 
 
-def _unpack(maps: np.ndarray, channels: int) -> torch.Tensor:
-    """Bit-packed maps (N, bytes) back to (N, channels, WINDOW, WINDOW) uint8 tensors."""
+def unpack_maps(maps: np.ndarray, channels: int) -> torch.Tensor:
+    """Bit-packed maps of the on-disk dataset (N, bytes) back to (N, channels, WINDOW, WINDOW) uint8 tensors."""
     shape = (channels, mapping.WINDOW, mapping.WINDOW)
     bits = np.unpackbits(maps, axis=1, count=int(np.prod(shape)))
     return torch.as_tensor(bits.reshape(-1, *shape))
@@ -440,7 +440,7 @@ class GoalTrainer(trainer_lib.Trainer):
         order = rng.permutation(len(fresh["label"]))
         for start in range(0, len(order), c.batch):
             idx = np.sort(order[start:start + c.batch])
-            logits = self.model(_unpack(fresh["maps"][idx], self.model.config.input_channels),
+            logits = self.model(unpack_maps(fresh["maps"][idx], self.model.config.input_channels),
                                 torch.as_tensor(fresh["node"][idx]), _bits(c, fresh, idx))
             bc = goal_loss(logits, torch.as_tensor(fresh["label"][idx]), c.label_sigma)
             choice = torch.as_tensor(fresh["choice"][idx])
@@ -484,7 +484,7 @@ class GoalTrainer(trainer_lib.Trainer):
                 order = rng.permutation(len(data["label"]))
             idx = np.sort(order[start:start + c.batch])
             channels = self.model.config.input_channels
-            maps = _unpack(data["maps"][idx], channels)
+            maps = unpack_maps(data["maps"][idx], channels)
             if c.potential:  # turned with the map: its last channel
                 potential_labels = torch.as_tensor(data["potential"][idx], dtype=torch.float32)[:, None]
                 maps = torch.cat([maps.float(), potential_labels], 1)
