@@ -37,6 +37,8 @@ DESCENT = round(TEACHER_LOOKAHEAD / mapping.CELL)
 DOOR_SEEN = 0.5
 #: Steps a :class:`GatedTeacherGoals` spends looking around on the spot in an episode before it follows frontiers.
 GATED_LOOK = 12
+#: The agent's own cell of the egocentric window (row-major): as a goal, the walk looks around on the spot.
+AGENT_CELL = (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2
 #: Offsets (metres) of the points of a window cell whose nearest free one gives its potential.
 _SUBCELLS = tuple((dx, dy) for dx in (-mapping.CELL / 3, 0.0, mapping.CELL / 3)
                   for dy in (-mapping.CELL / 3, 0.0, mapping.CELL / 3))
@@ -216,7 +218,7 @@ class SensedTeacherGoals(FurnitureTeacherGoals):
         self.expert.door_filter = lambda centre: door_mapped(mapper, centre)
         cell, labels = super().labels(mapper, pose, potential)
         if not self.expert.target_revealed() and self.expert.goal is None:
-            cell = (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2
+            cell = AGENT_CELL
         return cell, labels
 
 
@@ -272,7 +274,7 @@ class GatedTeacherGoals(TeacherGoals):
             return cell, labels
         if self._looked < GATED_LOOK:
             self._looked += 1
-            return (mapping.WINDOW // 2) * mapping.WINDOW + mapping.WINDOW // 2, labels
+            return AGENT_CELL, labels
         return self._frontier.cell(_MapView(mapper, pose)), labels
 
     def door_out(self, pose):
