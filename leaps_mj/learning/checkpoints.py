@@ -7,16 +7,16 @@ producing silent garbage.
 """
 
 import dataclasses
+import io
 import os
 import pathlib
-import tempfile
 from typing import Any, Mapping
 
 import torch
 
 from leaps_mj.learning.net_configs import ControllerConfig, GoalNetConfig, PolicyConfig, RoomClassifierConfig
 from leaps_mj.learning.nets import ActorCritic, ControllerNet, GoalNet, RoomClassifier
-from leaps_mj.world import rooms
+from leaps_mj.world import dataset, rooms
 
 #: Tag stored in every checkpoint, checked on load.
 CHECKPOINT_FORMAT = "leaps_mj.nets/1"
@@ -57,9 +57,9 @@ def save_checkpoint(
 ) -> None:
     """Writes ``model`` with its config, the class table and resolution, atomically.
 
-    The file is written to a temporary file in the same directory and moved
-    into place with ``os.replace``, so a crash never leaves a half-written
-    checkpoint under ``path``. Parent directories are created.
+    The file is written to a temporary file in the same directory, synced and
+    moved into place (:func:`leaps_mj.world.dataset.write_atomic`), so a crash
+    never leaves a half-written checkpoint under ``path``. Parent directories are created.
 
     Args:
       path: Destination file.
@@ -87,18 +87,9 @@ def save_checkpoint(
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         "extra": extra,
     }
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(payload, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    dataset.write_atomic(path, buffer.getvalue(), fsync=True)
 
 
 def load_policy(

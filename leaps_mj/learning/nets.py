@@ -1,6 +1,6 @@
 """Neural networks of LEAPS and its baselines.
 
-Three networks, each built from a frozen config dataclass (defined in
+Four networks, each built from a frozen config dataclass (defined in
 :mod:`leaps_mj.learning.net_configs`, importable from here):
 
 * :class:`ActorCritic` — the sub-policy μ(θ) of the paper: a CNN over the

@@ -107,14 +107,24 @@ def sha256_file(path: str | os.PathLike) -> str:
     return sha256_bytes(pathlib.Path(path).read_bytes())
 
 
-def write_atomic(path: str | os.PathLike, data: bytes) -> None:
-    """Writes ``data`` to ``path`` through a temporary file and a rename."""
+def write_atomic(path: str | os.PathLike, data: bytes, fsync: bool = False) -> None:
+    """Writes ``data`` to ``path`` through a temporary file and a rename.
+
+    Args:
+      path: Destination file; parent directories are created.
+      data: The file's bytes.
+      fsync: Whether the bytes reach the disk before the rename (checkpoints: a power cut leaves the old
+        file or the new one, never an empty one); off for the many small files of a dataset.
+    """
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
         os.chmod(tmp, 0o644)  # mkstemp makes it owner-only
         os.replace(tmp, path)
     finally:
