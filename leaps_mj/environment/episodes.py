@@ -32,6 +32,7 @@ import tqdm
 
 from leaps_mj.environment.roomnav import EpisodeSpec, HouseModel, load_episodes
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 from leaps_mj.world import houses, rooms
 
 MAX_PLAN_LENGTH = 5
@@ -227,7 +228,7 @@ def generate_hops(dataset: str, split: str, per_node: int, seed: int = 0,
 def write(path: str | pathlib.Path, episodes: list[EpisodeSpec]) -> None:
     """Writes episodes as JSON lines, atomically."""
     text = "".join(json.dumps(e.to_json(), sort_keys=True) + "\n" for e in episodes)
-    dataset_lib.write_atomic(path, text.encode())
+    files.write_atomic(path, text.encode())
 
 
 def run_episode(env, agent, spec, horizon: int, observer=None) -> dict:

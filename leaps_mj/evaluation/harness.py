@@ -69,6 +69,7 @@ from leaps_mj.planning import agents as agents_lib
 from leaps_mj.planning import semantic
 from leaps_mj.records import recorder as record_lib
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 
 
 @dataclasses.dataclass(frozen=True)
@@ -319,7 +320,7 @@ def append_rows(path: pathlib.Path, rows: list[dict]) -> None:
     writer.writeheader()
     for r in merged:
         writer.writerow({k: "" if r[k] is None else r[k] for k in CSV_FIELDS})
-    dataset_lib.write_atomic(path, buf.getvalue().encode())
+    files.write_atomic(path, buf.getvalue().encode())
 
 
 def _check_config(out: pathlib.Path, config: EvalConfig) -> None:
@@ -337,7 +338,7 @@ def _check_config(out: pathlib.Path, config: EvalConfig) -> None:
             raise ValueError(f"{str(out)!r} holds results made with other settings (saved, now): {diff}; "
                              "use another --out folder")
         return
-    dataset_lib.write_atomic(path, (json.dumps(config.to_json(), indent=1) + "\n").encode())
+    files.write_atomic(path, (json.dumps(config.to_json(), indent=1) + "\n").encode())
 
 
 @contextlib.contextmanager
@@ -591,8 +592,8 @@ def report(table: dict[str, list[dict]], horizons, config: EvalConfig, out: path
     summary = summarize(table, horizons)
     paired = stats.paired_comparisons(table, horizons, *compared(table))
     n = max((len(rows) for rows in table.values()), default=0)
-    dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, n, paired).encode())
-    dataset_lib.write_atomic(out / "summary.json", (json.dumps(
+    files.write_atomic(out / "results.md", markdown(summary, horizons, config, n, paired).encode())
+    files.write_atomic(out / "summary.json", (json.dumps(
         {"config": config.to_json(), "horizons": list(horizons), "episodes": n, "success": summary,
          "paired": paired}, indent=1) + "\n").encode())
     plot(summary, horizons, out)

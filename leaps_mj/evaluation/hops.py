@@ -44,6 +44,7 @@ import numpy as np
 from leaps_mj.environment import episodes as episodes_lib
 from leaps_mj.evaluation import backends, harness, stats
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 from leaps_mj.world import rooms
 
 #: Step budgets reported: one LEAPS hand-over (N = 30) and two.
@@ -271,11 +272,11 @@ def report(table, horizons, config, out: pathlib.Path, baseline: pathlib.Path | 
         base = load_baseline(baseline, config, table[PAIRED_LABEL])
         comparison = compare(table[PAIRED_LABEL], base, horizons)
         base_summary = summarize({PAIRED_LABEL: base}, horizons)[PAIRED_LABEL]
-    dataset_lib.write_atomic(out / "results.md", markdown(summary, horizons, config, comparison, baseline).encode())
+    files.write_atomic(out / "results.md", markdown(summary, horizons, config, comparison, baseline).encode())
     doc = {"config": config.to_json(), "horizons": list(horizons), "success": summary}
     if comparison is not None:
         doc["baseline"] = {"folder": str(baseline), "success": base_summary, "paired": comparison}
-    dataset_lib.write_atomic(out / "summary.json", (json.dumps(doc, indent=1) + "\n").encode())
+    files.write_atomic(out / "summary.json", (json.dumps(doc, indent=1) + "\n").encode())
     plot(summary, horizons, out, base_summary)
     return doc
 

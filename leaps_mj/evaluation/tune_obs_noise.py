@@ -40,6 +40,7 @@ from leaps_mj.evaluation import harness as evaluate
 from leaps_mj.planning import agents as agents_lib
 from leaps_mj.planning import semantic
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 
 PAPER = (semantic.PAPER_PSI_OBS0, semantic.PAPER_PSI_OBS1)
 #: The paper's N, steps between replans.
@@ -202,8 +203,8 @@ def main(argv=None) -> int:
         lines.append(f"| {point[0]:g} | {point[1]:g} | {point[2]} | {100 * r['rate']:.1f}% [{100 * r['low']:.1f}, "
                      f"{100 * r['high']:.1f}] (n={r['n']}){mark} |")
     table = "\n".join(lines) + "\n"
-    dataset_lib.write_atomic(out / "obs_noise.md", table.encode())
-    dataset_lib.write_atomic(out / "obs_noise.json", (json.dumps(
+    files.write_atomic(out / "obs_noise.md", table.encode())
+    files.write_atomic(out / "obs_noise.json", (json.dumps(
         {"psi_obs0": chosen[0], "psi_obs1": chosen[1], "replan_every": chosen[2], "rule": config.rule,
          "subpolicy": args.subpolicy, "policy_dir": args.policy_dir}, indent=1) + "\n").encode())
     model = semantic.SemanticModel(semantic.SemanticModel.from_json(prior).prior, *chosen[:2])

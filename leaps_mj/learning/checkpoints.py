@@ -16,7 +16,7 @@ import torch
 
 from leaps_mj.learning.net_configs import ControllerConfig, GoalNetConfig, PolicyConfig, RoomClassifierConfig
 from leaps_mj.learning.nets import ActorCritic, ControllerNet, GoalNet, RoomClassifier
-from leaps_mj.world import dataset, rooms
+from leaps_mj.world import files, rooms
 
 #: Tag stored in every checkpoint, checked on load.
 CHECKPOINT_FORMAT = "leaps_mj.nets/1"
@@ -58,7 +58,7 @@ def save_checkpoint(
     """Writes ``model`` with its config, the class table and resolution, atomically.
 
     The file is written to a temporary file in the same directory, synced and
-    moved into place (:func:`leaps_mj.world.dataset.write_atomic`), so a crash
+    moved into place (:func:`leaps_mj.world.files.write_atomic`), so a crash
     never leaves a half-written checkpoint under ``path``. Parent directories are created.
 
     Args:
@@ -89,7 +89,7 @@ def save_checkpoint(
     }
     buffer = io.BytesIO()
     torch.save(payload, buffer)
-    dataset.write_atomic(path, buffer.getvalue(), fsync=True)
+    files.write_atomic(path, buffer.getvalue(), fsync=True)
 
 
 def load_policy(

@@ -55,6 +55,7 @@ from leaps_mj.environment.roomnav import EpisodeSpec
 from leaps_mj.learning import checkpoints, classifier, nets
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 from leaps_mj.world import houses, rooms
 
 K = rooms.NUM_ROOM_TYPES
@@ -247,7 +248,7 @@ def metrics(logits: np.ndarray, data: dict, threshold: float = classifier.CONFID
 def _save_npz(path: pathlib.Path, arrays: dict) -> None:
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
-    dataset_lib.write_atomic(path, buf.getvalue())
+    files.write_atomic(path, buf.getvalue())
 
 
 class Trainer(trainer_lib.Trainer):
@@ -276,7 +277,7 @@ class Trainer(trainer_lib.Trainer):
         self.best, self.history = extra["best"], extra["history"]
 
     def publish(self, extra: dict) -> None:
-        dataset_lib.write_atomic(self.out / "metrics.json", (json.dumps(self.best, indent=1) + "\n").encode())
+        files.write_atomic(self.out / "metrics.json", (json.dumps(self.best, indent=1) + "\n").encode())
 
     def data(self, split: str) -> dict:
         """The samples of a split, made once and cached in ``out``."""

@@ -51,6 +51,7 @@ from leaps_mj.environment import goal_teacher, map_navigation, mapping, roomnav
 from leaps_mj.learning import checkpoints, goal_policy, nets, training_env
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 from leaps_mj.world import rooms
 
 
@@ -471,7 +472,7 @@ class GoalTrainer(trainer_lib.Trainer):
         self.data_dir.mkdir(parents=True, exist_ok=True)
         buffer = io.BytesIO()
         np.savez_compressed(buffer, **fresh)
-        dataset_lib.write_atomic(self.data_dir / f"round_{self.iteration:03d}.npz", buffer.getvalue())
+        files.write_atomic(self.data_dir / f"round_{self.iteration:03d}.npz", buffer.getvalue())
         data = self._dataset(fresh)
         rng = np.random.default_rng(c.seed + self.iteration)
         self.model.train()

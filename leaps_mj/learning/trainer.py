@@ -36,7 +36,7 @@ from typing import Any
 
 import tqdm
 
-from leaps_mj.world import dataset as dataset_lib
+from leaps_mj.world import files
 
 
 def parse_bool(text: str) -> bool:
@@ -138,7 +138,7 @@ class CsvLog:
         writer = csv.DictWriter(text, self.fields, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
-        dataset_lib.write_atomic(self.path, text.getvalue().encode())
+        files.write_atomic(self.path, text.getvalue().encode())
 
     def write(self, row: dict[str, Any]) -> None:
         if self.fields is None:
@@ -261,7 +261,7 @@ class Trainer:
             checkpoints.save_checkpoint(self.state_path, model, model.config, state)
             self.model.to(device)
         else:
-            dataset_lib.write_atomic(self.state_path, (json.dumps(extra) + "\n").encode())
+            files.write_atomic(self.state_path, (json.dumps(extra) + "\n").encode())
         self.publish(extra)
 
     # -- the loop -----------------------------------------------------------------------------

@@ -24,8 +24,6 @@ import json
 import math
 import numbers
 import os
-import pathlib
-import tempfile
 
 import matplotlib.figure
 import networkx as nx
@@ -33,7 +31,7 @@ import numpy as np
 import scipy.special
 import scipy.stats
 
-from leaps_mj.world import rooms
+from leaps_mj.world import files, rooms
 
 #: Nodes of the semantic graph: the room types, then ``indoor``.
 NUM_NODES = len(rooms.GRAPH_NODES)
@@ -471,7 +469,7 @@ class SemanticModel:
             data["n_pos"] = self.n_pos.tolist()
             data["n_neg"] = self.n_neg.tolist()
         text = json.dumps(data, indent=1) + "\n"
-        _atomic_write(path, lambda f: f.write(text.encode()), suffix=".json")
+        files.write_atomic(path, text.encode())
 
     @classmethod
     def from_json(cls, path) -> "SemanticModel":
@@ -499,30 +497,6 @@ class SemanticModel:
             )
         except ValueError as e:
             raise ValueError(f"bad semantic model file {os.fspath(path)!r}: {e}") from e
-
-
-def _atomic_write(path, write, suffix: str) -> None:
-    """Write a file via a temporary file in the same directory and os.replace.
-
-    Readers never see a half-written file, even if the writer crashes. The
-    file is made readable by all (0644), like an ordinary new file, rather
-    than keeping the temporary file's private mode.
-
-    Args:
-      path: destination file.
-      write: callable receiving the open binary temporary file.
-      suffix: temporary file suffix (some writers infer the format from it).
-    """
-    path = pathlib.Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def learn_prior(pos_counts, trials, floor: float = 1e-4) -> np.ndarray:
@@ -668,7 +642,7 @@ def plot_prior(prior, path, rooms=("dining_room", "bedroom", "outdoor")) -> None
             ax.text(v + 0.02, k, f"{v:.2f}", va="center", fontsize=8)
     _draw_graph(axes[-1], prior)
     axes[-1].set_title("room-connectivity prior")
-    _atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=120), suffix=".png")
+    files.write_atomic_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
 
 
 def plot_belief(model: SemanticModel, ax, highlight_path=None):

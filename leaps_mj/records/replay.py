@@ -25,8 +25,7 @@ import os
 import pathlib
 import struct
 import sys
-import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import imageio.v2 as imageio
 import matplotlib
@@ -45,7 +44,7 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory  # no
 from PIL import Image, ImageDraw, ImageFont  # noqa: E402
 
 from leaps_mj.records import recorder as record
-from leaps_mj.world import houses, rooms, topdown  # noqa: E402
+from leaps_mj.world import files, houses, rooms, topdown  # noqa: E402
 
 _MAGIC = b"\x89MCAP0\r\n"
 #: Topics a record must have to be replayed (``/outcome`` is missing from a recovered file).
@@ -355,19 +354,6 @@ def video_frames(rec: EpisodeRecord):
         yield out
 
 
-def _write_atomic(path: pathlib.Path, write: Callable[[str], None]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def has_ffmpeg() -> bool:
     """Whether imageio can write MP4 (the imageio-ffmpeg package is installed)."""
     return importlib.util.find_spec("imageio_ffmpeg") is not None
@@ -392,10 +378,11 @@ def save_video(rec: EpisodeRecord, path: str | os.PathLike, fps: int = 10) -> pa
         path = gif
     frames = list(video_frames(rec))
     if path.suffix == ".mp4":
-        _write_atomic(path, lambda tmp: imageio.mimwrite(tmp, frames, format="FFMPEG", fps=fps, codec="libx264",
-                                                         quality=7, macro_block_size=16))
+        files.write_atomic_with(path, lambda tmp: imageio.mimwrite(
+            tmp, frames, format="FFMPEG", fps=fps, codec="libx264", quality=7, macro_block_size=16))
     else:
-        _write_atomic(path, lambda tmp: imageio.mimwrite(tmp, frames, format="GIF", duration=1000 / fps, loop=0))
+        files.write_atomic_with(
+            path, lambda tmp: imageio.mimwrite(tmp, frames, format="GIF", duration=1000 / fps, loop=0))
     return path
 
 
@@ -443,7 +430,7 @@ def recover(src: str | os.PathLike, dst: str | os.PathLike) -> int:
                     w.add_metadata(x.name, x.metadata)
             w.finish()
 
-    _write_atomic(dst, write)
+    files.write_atomic_with(dst, write)
     return count
 
 

@@ -23,12 +23,11 @@ import json
 import os
 import pathlib
 import re
-import tempfile
 from collections.abc import Callable, Collection, Iterable
 
 import numpy as np
 
-from leaps_mj.world import houses, rooms
+from leaps_mj.world import files, houses, rooms
 
 #: The splits of a dataset, in seed-derivation order.
 SPLITS = ("train", "valid", "test")
@@ -105,31 +104,6 @@ def sha256_bytes(data: bytes) -> str:
 
 def sha256_file(path: str | os.PathLike) -> str:
     return sha256_bytes(pathlib.Path(path).read_bytes())
-
-
-def write_atomic(path: str | os.PathLike, data: bytes, fsync: bool = False) -> None:
-    """Writes ``data`` to ``path`` through a temporary file and a rename.
-
-    Args:
-      path: Destination file; parent directories are created.
-      data: The file's bytes.
-      fsync: Whether the bytes reach the disk before the rename (checkpoints: a power cut leaves the old
-        file or the new one, never an empty one); off for the many small files of a dataset.
-    """
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            if fsync:
-                f.flush()
-                os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes it owner-only
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def _job(args):
@@ -223,7 +197,7 @@ def write_dataset(
     jobs = [(seed, s, i, str(preview_dir) if s in preview else None)
             for s in SPLITS for i in range(counts[s])]
 
-    files: dict[str, str] = {}
+    digests: dict[str, str] = {}
     results: Iterable
     pool = None
     if workers > 1 and len(jobs) > 1:
@@ -242,8 +216,8 @@ def write_dataset(
             for ext, text in (("xml", xml), ("json", js)):
                 rel = f"{split}/{hid}.{ext}"
                 data = text.encode()
-                write_atomic(out / rel, data)
-                files[rel] = sha256_bytes(data)
+                files.write_atomic(out / rel, data)
+                digests[rel] = sha256_bytes(data)
     finally:
         if pool is not None:
             pool.terminate()
@@ -267,9 +241,9 @@ def write_dataset(
         },
         "splits": {s: {"count": counts[s], "ids": [house_id(s, i) for i in range(counts[s])],
                        "seeds": seeds[s]} for s in SPLITS},
-        "files": dict(sorted(files.items())),
+        "files": dict(sorted(digests.items())),
     }
-    write_atomic(out / MANIFEST, (json.dumps(manifest, indent=1) + "\n").encode())
+    files.write_atomic(out / MANIFEST, (json.dumps(manifest, indent=1) + "\n").encode())
     return manifest
 
 

@@ -8,8 +8,6 @@ and sub-targets are drawn on top by the callers (case studies, replay).
 from __future__ import annotations
 
 import os
-import pathlib
-import tempfile
 
 import matplotlib
 
@@ -17,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.patches as mpatches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 
-from leaps_mj.world import houses  # noqa: E402
+from leaps_mj.world import files, houses  # noqa: E402
 
 #: Fill colour per room type (also used for floor materials and scenes).
 ROOM_COLORS = {
@@ -78,17 +76,9 @@ def legend_handles():
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 150) -> None:
     """Saves a figure atomically (temp file in the same folder + rename) and closes it."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.chmod(tmp, 0o644)  # mkstemp makes it owner-only
-        os.replace(tmp, path)
+        files.write_atomic_with(path, lambda tmp: fig.savefig(tmp, dpi=dpi, bbox_inches="tight"))
     finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
         plt.close(fig)
 
 
