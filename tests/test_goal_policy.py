@@ -496,6 +496,26 @@ def test_descending_the_teachers_potential_leads_where_the_teachers_goal_lies(ti
     env.close()
 
 
+def test_a_bf16_learner_trains_float32_weights_near_the_fp32_learners(tiny_dataset, tmp_path):
+    with pytest.raises(ValueError, match="precision 'fp16'"):
+        train_goal.GoalTrainConfig(precision="fp16")
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=1, episodes=2,
+                                 potential=True)
+    weights = {}
+    for precision in ("fp32", "bf16"):
+        trainer = train_goal.GoalTrainer(dataclasses.replace(config, precision=precision), tmp_path / precision,
+                                         progress=False)
+        trainer.train()
+        weights[precision] = torch.cat([p.detach().flatten() for p in trainer.model.parameters()])
+        assert {p.dtype for p in trainer.model.parameters()} == {torch.float32}
+        assert all(s["exp_avg"].dtype == torch.float32 for s in trainer.optimizer.state.values())
+    torch.manual_seed(config.seed)  # the trainer's initial weights
+    start = torch.cat([p.detach().flatten() for p in nets.GoalNet(config.net_config).parameters()])
+    # Same data, same draws: bf16 rounding moves the weights a little, far less than training moved them.
+    moved, apart = (weights["fp32"] - start).norm(), (weights["bf16"] - weights["fp32"]).norm()
+    assert 0 < apart < 0.5 * moved, (apart, moved)
+
+
 def test_a_conv_goal_head_scores_every_cell_with_the_same_weights(tiny_dataset, tmp_path):
     with pytest.raises(ValueError, match="goal_head 'deconv'"):
         nets.GoalNetConfig(goal_head="deconv")

@@ -129,6 +129,9 @@ class GoalTrainConfig:
       horizon: Steps of a training episode.
       max_start_doors: Starts at most this many doors from a room of the target.
       max_start_distance: Starts at most this many metres (geodesic) from it.
+      precision: Arithmetic of the learner's forward and backward passes: ``fp32``, or ``bf16`` (CPU
+        autocast: convolutions and matrix products in bfloat16, which CPUs with AMX or AVX-512 BF16 run
+        1.6-2x faster; weights, optimizer state, losses and the acting networks stay float32).
       seed: Seed of every random draw of the run.
     """
 
@@ -166,6 +169,7 @@ class GoalTrainConfig:
     horizon: int = 60
     max_start_doors: int = 2
     max_start_distance: float = 13.0
+    precision: str = "fp32"
     seed: int = 0
 
     @property
@@ -189,6 +193,8 @@ class GoalTrainConfig:
             raise ValueError(f"teacher {self.teacher!r}: expected one of {sorted(TEACHERS)}")
         if self.goal_head not in ("linear", "conv"):
             raise ValueError(f"goal_head {self.goal_head!r}: expected 'linear' or 'conv'")
+        if self.precision not in ("fp32", "bf16"):
+            raise ValueError(f"precision {self.precision!r}: expected 'fp32' or 'bf16'")
         if self.method not in ("dagger", "reinforce"):
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
         if not 0.0 <= self.beta <= 1.0:
@@ -420,6 +426,10 @@ class GoalTrainer(trainer_lib.Trainer):
         self._data = {k: np.concatenate([self._data[k], fresh[k]]) for k in keys}
         return self._data
 
+    def _autocast(self) -> torch.autocast:
+        """The learner's forward passes in the run's ``precision`` (the backward follows their dtypes)."""
+        return torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.config.precision == "bf16")
+
     def iterate(self) -> dict:
         return self._reinforce() if self.config.method == "reinforce" else self._dagger()
 
@@ -441,8 +451,9 @@ class GoalTrainer(trainer_lib.Trainer):
         order = rng.permutation(len(fresh["label"]))
         for start in range(0, len(order), c.batch):
             idx = np.sort(order[start:start + c.batch])
-            logits = self.model(unpack_maps(fresh["maps"][idx], self.model.config.input_channels),
-                                torch.as_tensor(fresh["node"][idx]), _bits(c, fresh, idx))
+            with self._autocast():
+                logits = self.model(unpack_maps(fresh["maps"][idx], self.model.config.input_channels),
+                                    torch.as_tensor(fresh["node"][idx]), _bits(c, fresh, idx)).float()
             bc = goal_loss(logits, torch.as_tensor(fresh["label"][idx]), c.label_sigma)
             choice = torch.as_tensor(fresh["choice"][idx])
             chose = choice >= 0
@@ -494,8 +505,11 @@ class GoalTrainer(trainer_lib.Trainer):
                 maps, labels = mirror(maps, labels, torch.as_tensor(rng.random(len(idx)) < 0.5))
             if c.rotate:
                 maps, labels = rotate(maps, labels, torch.as_tensor(rng.integers(0, 4, len(idx))))
-            logits, potential = self.model.heads(maps[:, :channels], torch.as_tensor(data["node"][idx]),
-                                                 _bits(c, data, idx))
+            with self._autocast():
+                logits, potential = self.model.heads(maps[:, :channels], torch.as_tensor(data["node"][idx]),
+                                                     _bits(c, data, idx))
+            logits = logits.float()
+            potential = None if potential is None else potential.float()
             loss = goal_loss(logits, labels, c.label_sigma)
             if c.potential:
                 regression = potential_loss(potential, maps[:, channels].flatten(1) * mapping.CELL,
