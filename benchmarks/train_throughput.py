@@ -92,9 +92,9 @@ def measure_goal(rounds: int, dataset: str, precision: str, goal_head: str) -> d
         log = policy_eval.read_progress(f"{out}/progress.csv")
     collect, learn = float(np.sum(log["collect_seconds"])), float(np.sum(log["train_seconds"]))
     fresh, trained = float(np.sum(log["fresh_samples"])), float(config.epochs * np.sum(log["samples"]))
-    return {"precision": precision, "rounds": rounds, "fresh": fresh, "collect_sps": fresh / collect, "learner_sps": trained / learn,
-            "fresh_sps": fresh / (collect + learn), "trained_sps": trained / (collect + learn),
-            "learner_share": learn / (collect + learn)}
+    return {"precision": precision, "rounds": rounds, "fresh": fresh, "collect_sps": fresh / collect,
+            "learner_sps": trained / learn, "fresh_sps": fresh / (collect + learn),
+            "trained_sps": trained / (collect + learn), "learner_share": learn / (collect + learn)}
 
 
 def main(argv=None) -> int:
@@ -109,9 +109,10 @@ def main(argv=None) -> int:
     parser.add_argument("--dataset", default=dataset.CANONICAL)
     parser.add_argument("--target", default="kitchen", help="target of the per-target presets")
     parser.add_argument("--goal-rounds", type=int, default=3, help="rounds of the map-goal trainer (0: skip it)")
-    parser.add_argument("--goal-precision", nargs="+", default=["fp32", "bf16"], choices=["fp32", "bf16"],
+    parser.add_argument("--goal-precision", nargs="+", default=list(train_goal.PRECISIONS),
+                        choices=train_goal.PRECISIONS,
                         help="learner precisions of the map-goal trainer, one row each")
-    parser.add_argument("--goal-head", default="linear", choices=["linear", "conv"],
+    parser.add_argument("--goal-head", default="linear", choices=nets.GOAL_HEADS,
                         help="goal head of the map-goal network")
     args = parser.parse_args(argv)
     if args.iterations < 1 or args.warmup < 0 or (args.num_envs is not None and args.num_envs < 1) or args.threads < 1 \

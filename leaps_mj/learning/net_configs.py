@@ -152,6 +152,10 @@ class RoomClassifierConfig:
             _check_positive(name, getattr(self, name))
 
 
+#: How a map-goal network reads its goal logits off the features (``GoalNetConfig.goal_head``).
+GOAL_HEADS = ("linear", "conv")
+
+
 @dataclasses.dataclass(frozen=True)
 class GoalNetConfig:
     """Architecture of the map-goal network of the map-goal sub-policy.
@@ -226,7 +230,7 @@ class GoalNetConfig:
                 raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if self.decoder not in ("linear", "conv"):
             raise ValueError(f"decoder {self.decoder!r}: expected 'linear' or 'conv'")
-        if self.goal_head not in ("linear", "conv"):
+        if self.goal_head not in GOAL_HEADS:
             raise ValueError(f"goal_head {self.goal_head!r}: expected 'linear' or 'conv'")
         if self.goals not in ("logits", "potential"):
             raise ValueError(f"goals {self.goals!r}: expected 'logits' or 'potential'")

@@ -40,7 +40,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from leaps_mj.environment import mapping
-from leaps_mj.learning.net_configs import ControllerConfig, GoalNetConfig, PolicyConfig, RoomClassifierConfig
+from leaps_mj.learning.net_configs import (GOAL_HEADS, ControllerConfig, GoalNetConfig, PolicyConfig,
+                                           RoomClassifierConfig)
 from leaps_mj.world import rooms
 
 #: (h, c) of an LSTM, each (B, units).

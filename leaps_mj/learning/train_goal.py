@@ -55,6 +55,9 @@ from leaps_mj.world import files
 from leaps_mj.world import rooms
 
 
+#: The learner's arithmetic (``GoalTrainConfig.precision``): float32, or bfloat16 CPU autocast.
+PRECISIONS = ("fp32", "bf16")
+
 #: The goal teachers by name (``GoalTrainConfig.teacher``).
 TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals,
             "observable-furniture": goal_teacher.FurnitureTeacherGoals, "sensed": goal_teacher.SensedTeacherGoals,
@@ -191,9 +194,9 @@ class GoalTrainConfig:
                 raise ValueError(f"{name} {value!r}: expected an integer >= 0")
         if self.teacher not in TEACHERS:
             raise ValueError(f"teacher {self.teacher!r}: expected one of {sorted(TEACHERS)}")
-        if self.goal_head not in ("linear", "conv"):
+        if self.goal_head not in nets.GOAL_HEADS:
             raise ValueError(f"goal_head {self.goal_head!r}: expected 'linear' or 'conv'")
-        if self.precision not in ("fp32", "bf16"):
+        if self.precision not in PRECISIONS:
             raise ValueError(f"precision {self.precision!r}: expected 'fp32' or 'bf16'")
         if self.method not in ("dagger", "reinforce"):
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
