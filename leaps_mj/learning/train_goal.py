@@ -221,10 +221,12 @@ PRESETS = {
     # Seconds: for tests.
     "tiny": GoalTrainConfig(num_houses=4, width=24, height=18, workers=1, rounds=2, episodes=2, epochs=1,
                             batch=16, horizon=12),
-    # The shipped network (session 10, arm SC of docs/training.md): 12 rounds of 240 hop-like episodes on the
-    # 2 cores (about 125 k samples, 35 minutes), mirrored maps, goal labels spread over σ = 1 cell, the coarse
-    # 16 m context window and one channel per room type's see-objects. Session 8's B: --context false --semantic false.
-    "cpu": GoalTrainConfig(rounds=12, mirror=True, label_sigma=1.0, context=True, semantic=True),
+    # The shipped network (session 19, arm CHb30 of docs/training.md): 30 rounds of 240 hop-like episodes on the
+    # 2 cores (about 290 k samples; 2.2 h with --threads 2), mirrored maps, goal labels spread over σ = 1 cell,
+    # the coarse 16 m context window, one channel per room type's see-objects, the convolutional goal head and a
+    # bfloat16 learner. Session 12's SClos: --rounds 12 --goal-head linear --precision fp32.
+    "cpu": GoalTrainConfig(rounds=30, mirror=True, label_sigma=1.0, context=True, semantic=True, goal_head="conv",
+                           precision="bf16"),
 }
 
 
