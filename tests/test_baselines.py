@@ -169,6 +169,12 @@ def test_tiny_controller_trainer_saves_resumes_and_validates(tiny_dataset, tmp_p
     assert (tmp_path / "progress.csv").read_text().count("\n") == 3
     with pytest.raises(ValueError, match="another configuration"):
         train_controller.Trainer(dataclasses.replace(config, lr=0.5), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="another configuration"):  # a run cannot shrink
+        train_controller.Trainer(dataclasses.replace(config, episodes=2), tmp_path, progress=False)
+    extended = train_controller.Trainer(dataclasses.replace(config, episodes=6), tmp_path, progress=False)
+    assert extended.update == 2 and not extended.finished
+    extended.train()
+    assert extended.finished and [r["update"] for r in extended.history] == [1, 2, 3]
     with pytest.raises(ValueError, match="subpolicy"):
         train_controller.resolve_subpolicy("best")
 

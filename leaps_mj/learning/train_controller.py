@@ -248,6 +248,9 @@ class Trainer(trainer_lib.Trainer):
 
     unit = "update"
     loss_keys = frozenset({"policy_loss", "value_loss", "entropy"})
+    # Nothing is scheduled over the episodes (constant learning rate and entropy weight; each
+    # update's seeds depend on its index only): a finished run can go on, e.g. over a new sub-policy.
+    growable = frozenset({"episodes"})
 
     def __init__(self, config: TrainConfig, out: str | os.PathLike, progress: bool = True, backend: str = "local",
                  num_workers: int | None = None, ray_address: str | None = None):
