@@ -317,7 +317,6 @@ def test_the_shipped_map_goal_network_its_mu_s_and_controller_load_and_act_at_12
         cpu = train_goal.PRESETS["cpu"]  # the shipped network and μ_s are both the cpu preset's (session 22)
         for shipped in (policy, mu_s):
             assert shipped.metadata["round"] == cpu.rounds and shipped.net.config.goal_head == cpu.goal_head
-        for shipped in (policy, mu_s):
             assert (shipped.width, shipped.height) == (40, 30)
             ts = env.reset()
             shipped.reset(env.episode.target)
