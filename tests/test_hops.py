@@ -145,6 +145,27 @@ def test_main_refuses_what_it_cannot_compare(hop_dataset, tmp_path, capsys):
     assert not (tmp_path / "d").exists()  # refused before running anything
 
 
+def test_the_large_hop_set_is_another_draw_run_and_paired_only_with_itself(hop_dataset, tmp_path, load_tool,
+                                                                           capsys):
+    dataset, eps, _ = hop_dataset
+    tool = load_tool("make_episodes")
+    assert tool.main(["--dataset", str(dataset), "--split", "test", "--hops", "--large", "--per-node", "3"]) == 0
+    large = episodes.load_split(str(dataset), "test", "hops_large")
+    again, _ = episodes.generate_hops(str(dataset), "test", per_node=3, seed=episodes.HOP_SETS["hops_large"][1])
+    assert large == again and len(large) == len(eps) and [e.start for e in large] != [e.start for e in eps]
+    assert episodes.load_split(str(dataset), "test", "hops") == eps  # the standard set is left as it was
+    with pytest.raises(SystemExit):
+        tool.main(["--dataset", str(dataset), "--large"])
+    assert "--large need --hops" in capsys.readouterr().err
+    assert _main(dataset, tmp_path / "large", "--agent", "pure", "--large") == 0
+    assert json.loads((tmp_path / "large" / "summary.json").read_text())["config"]["episodes"] == "hops_large"
+    rows = harness.read_rows(harness.csv_path(tmp_path / "large", "pure"))
+    assert {(r["house"], r["target"], r["plan_length"]) for r in rows} <= {
+        (e.house, e.target, e.plan_length) for e in large}
+    assert _main(dataset, tmp_path / "standard", "--agent", "pure", "--baseline", str(tmp_path / "large")) == 2
+    assert "'episodes': ('hops_large', 'hops')" in capsys.readouterr().err
+
+
 def test_a_partial_checkpoint_folder_runs_on_its_nodes(hop_dataset, tmp_path, capsys):
     dataset, _, _ = hop_dataset
     folder = tmp_path / "kitchen_only"

@@ -39,7 +39,12 @@ MAX_PLAN_LENGTH = 5
 #: Door distances of the hop episodes: plan lengths from the start room to the node's nearest room.
 HOP_DISTANCES = (1, 2)
 #: Fixed episode sets: name -> (file name pattern, options of tools/make_episodes.py that write it).
-EPISODE_SETS = {"plan_length": ("{split}.jsonl", ""), "hops": ("hops_{split}.jsonl", "--hops ")}
+EPISODE_SETS = {"plan_length": ("{split}.jsonl", ""), "hops": ("hops_{split}.jsonl", "--hops "),
+                "hops_large": ("hops_large_{split}.jsonl", "--hops --large ")}
+#: The hop sets: name -> (starts per node and door distance by split, seed of the draw). ``hops_large`` is an
+#: independent draw (another seed), over three times the size: for differences of a few points, and for a
+#: figure on starts that no training decision was ever made on.
+HOP_SETS = {"hops": ({"valid": 20, "test": 30}, 0), "hops_large": ({"valid": 100, "test": 100}, 1)}
 _MAX_DRAWS = 1000  # draws of one hop start before concluding that all its candidate cells lie in the node
 
 

@@ -138,7 +138,7 @@ class EvalConfig:
       replan_every: LEAPS's N.
       seed: base seed of the episodes' agents.
       episodes: the fixed episode set (a key of
-        :data:`leaps_mj.environment.episodes.EPISODE_SETS`: "plan_length" or "hops").
+        :data:`leaps_mj.environment.episodes.EPISODE_SETS`: "plan_length", "hops" or "hops_large").
       policy_dir: with ``subpolicy="learned"``, a folder of sub-policy
         checkpoints (``<node>.pt``, ``shared.pt`` or ``goal.pt``) or the name of a
         shipped one (:data:`leaps_mj.learning.policy_folder.SHIPPED`); None: the

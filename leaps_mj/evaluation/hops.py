@@ -19,6 +19,11 @@ step, through :func:`leaps_mj.evaluation.harness.run` (resumable CSVs, worker
 processes or Ray actors with ``--backend ray``, the same per-episode seeds for every agent and
 sub-policy).
 
+``--large`` runs the large hop set instead (``hops_large_<split>.jsonl``, written by
+``python tools/make_episodes.py --hops --large``): 100 starts per node and distance drawn
+with another seed, for differences of a few points and for a figure on starts no training
+decision was made on.
+
 ``--policy-dir DIR`` runs the checkpoints of a newly trained set
 (``DIR/<node>.pt``) instead of the shipped ones; ``--baseline FOLDER`` pairs
 its ``pure`` results with those of an earlier run on the same episodes and
@@ -100,14 +105,14 @@ def check_baseline(folder: pathlib.Path, config: harness.EvalConfig) -> None:
     """Checks that a result folder is a hop run comparable with ``config``.
 
     Raises:
-      ValueError: unless it is a hop run of the same dataset, split and seed
+      ValueError: unless it is a hop run of the same dataset, split, seed and hop set
         (the same episodes and per-episode seeds) with at least this horizon.
     """
     path = folder / "config.json"
     if not path.is_file():
         raise ValueError(f"baseline {str(folder)!r} holds no config.json: expected a hop benchmark result folder")
     saved = {**harness.LATER_FIELDS, **json.loads(path.read_text())}
-    want = {"dataset": config.dataset, "split": config.split, "seed": config.seed, "episodes": "hops"}
+    want = {"dataset": config.dataset, "split": config.split, "seed": config.seed, "episodes": config.episodes}
     diff = {k: (saved.get(k), v) for k, v in want.items() if saved.get(k) != v}
     if saved.get("horizon", 0) < config.horizon:
         diff["horizon"] = (saved.get("horizon"), f">= {config.horizon}")
@@ -302,6 +307,8 @@ def main(argv=None) -> int:
     p.add_argument("--subset", choices=list(SUBSETS), default="full",
                    help=f"episodes per node and door distance: {SUBSETS}")
     p.add_argument("--per-node", type=int, default=None, help="episodes per node and distance (overrides --subset)")
+    p.add_argument("--large", action="store_true",
+                   help="the large hop set (hops_large_<split>.jsonl: 100 starts per node and distance, another draw)")
     p.add_argument("--nodes", nargs="+", choices=list(rooms.GRAPH_NODES), default=None,
                    help="only the episodes towards these nodes (e.g. the ones a new set retrained)")
     p.add_argument("--limit", type=int, default=None, help="only the first N selected episodes")
@@ -315,12 +322,13 @@ def main(argv=None) -> int:
     if args.limit is not None and args.limit < 1:
         p.error(f"--limit {args.limit}: expected a positive integer")
     where = backends.from_arguments(p, args)
+    kind = "hops_large" if args.large else "hops"
     try:
         config = harness.EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1],
-                                    subpolicy=args.subpolicy, seed=args.seed, episodes="hops",
+                                    subpolicy=args.subpolicy, seed=args.seed, episodes=kind,
                                     policy_dir=harness.command_line_policy_dir(args.subpolicy, args.policy_dir),
                                     temperature=args.temperature)
-        specs = episodes_lib.load_split(args.dataset, args.split, "hops")
+        specs = episodes_lib.load_split(args.dataset, args.split, kind)
         # Node filter after the draw: a run on some nodes gets the full run's episodes of those nodes.
         indices = [i for i in episodes_lib.select_episodes(specs, args.per_node or SUBSETS[args.subset],
                                                            seed=args.seed, stratum=_stratum)
