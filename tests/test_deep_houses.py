@@ -112,6 +112,15 @@ def test_canonical_episode_files_match_a_fresh_draw(tmp_path):
     assert (tmp_path / "valid.jsonl").read_bytes() == committed.read_bytes()
 
 
+def test_the_committed_large_hop_set_matches_a_fresh_draw(tmp_path):
+    """``python tools/make_episodes.py --hops --large`` draws the committed large hop set (valid split)."""
+    quotas, seed = episodes.HOP_SETS["hops_large"]
+    eps, _ = episodes.generate_hops(dataset.CANONICAL, "valid", per_node=quotas["valid"], seed=seed)
+    episodes.write(tmp_path / "large.jsonl", eps)
+    committed = episodes.episodes_path(dataset.CANONICAL, "valid", "hops_large")
+    assert (tmp_path / "large.jsonl").read_bytes() == committed.read_bytes()
+
+
 def test_roomnav_v1_stays_loadable():
     assert dataset.CANONICAL == "roomnav-v2"
     assert dataset.verify("roomnav-v1") == []
