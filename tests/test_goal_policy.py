@@ -428,6 +428,37 @@ def test_reinforce_raises_the_goals_of_episodes_that_succeeded(tiny_dataset, tmp
         trainer.warm_start(goal_policy.DEFAULT_DIR)  # the shipped network reads 40x30 maps, this run 24x18
 
 
+def test_reinforce_clips_how_far_a_round_pushes_a_failed_goal_down(tiny_dataset, tmp_path):
+    rng = np.random.default_rng(0)
+    window = (rng.random((len(mapping.CHANNELS), mapping.WINDOW, mapping.WINDOW)) < 0.2).astype(np.uint8)
+    good, bad = 3 * mapping.WINDOW + 5, 20 * mapping.WINDOW + 9
+    # One episode chose `good` and succeeded; 39 steps of another chose `bad` and failed: ten updates push `bad` down.
+    n = 40
+    fresh = {"maps": np.stack([np.packbits(window)] * n), "node": np.full(n, 2), "label": np.full(n, good),
+             "choice": np.array([good] + [bad] * (n - 1)), "episode": np.array([0] + [1] * (n - 1)),
+             "success": np.array([True, False]), "teacher": np.zeros(n, bool)}
+
+    def drop(clip):
+        config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), method="reinforce",
+                                     bc_coef=0.0, rounds=1, batch=4, lr=1e-3, clip=clip)
+        trainer = train_goal.GoalTrainer(config, tmp_path / str(clip), progress=False)
+        trainer._collect = lambda: fresh
+
+        def logp():
+            with torch.no_grad():
+                logits = trainer.model(torch.as_tensor(window[None]), torch.tensor([2]))[0]
+            return float(torch.log_softmax(logits / config.temperature, 0)[bad])
+
+        before = logp()
+        trainer.iterate()
+        return before - logp()
+
+    plain, clipped = drop(0.0), drop(0.2)
+    assert plain > 10 and 0 < clipped < 3  # unclipped, the failed goal's log-probability runs away
+    with pytest.raises(ValueError, match="clip 1.0"):
+        dataclasses.replace(train_goal.PRESETS["tiny"], clip=1.0)
+
+
 def test_mu_s_a_network_reading_the_room_bits_trains_acts_on_them_and_is_found_in_a_folder(
         tiny_dataset, tmp_path, env):
     from leaps_mj.learning import policies, policy_folder

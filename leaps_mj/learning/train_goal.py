@@ -19,7 +19,8 @@ nothing to the learner, and a sample is reused ``epochs`` times per round.
 
 ``--method reinforce --init-from DIR`` fine-tunes a trained network instead: every round's
 episodes are driven by goals sampled from it, and it takes a policy-gradient step towards the
-goals of the episodes that succeeded (REINFORCE with a per-node mean baseline), kept near the
+goals of the episodes that succeeded (REINFORCE with a per-node mean baseline, each goal's
+probability ratio clipped as in PPO so that a round cannot drive it to zero), kept near the
 teacher by a cross-entropy term; this optimises the hop success itself rather than agreement
 with a teacher the network cannot always read.
 
@@ -122,6 +123,10 @@ class GoalTrainConfig:
         its goal choices (advantage: the episode's success minus the round's mean success for its
         node) plus ``bc_coef`` times the cross-entropy to the teacher's goals on the round's states;
         no dataset is aggregated. For fine-tuning a DAgger network (``init_from``).
+      clip: With ``reinforce``, the PPO clip range of the probability ratio of each chosen goal to its
+        probability before the round's update (0: the plain policy gradient, unbounded; session 25 saw
+        it blow up within one round of 1,200 episodes: the log-probability of failed goals is pushed
+        towards minus infinity).
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
       temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
         argmax the sub-policy acts with).
@@ -168,6 +173,7 @@ class GoalTrainConfig:
     init_from: str = ""
     temperature: float = 0.5
     bc_coef: float = 0.5
+    clip: float = 0.2
     commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
@@ -204,6 +210,8 @@ class GoalTrainConfig:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
             raise ValueError(f"label_sigma {self.label_sigma!r}: expected a number >= 0")
+        if not 0.0 <= self.clip < 1.0:
+            raise ValueError(f"clip {self.clip!r}: expected a value in [0, 1)")
         for name in ("bc_coef", "potential_coef"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a number >= 0")
@@ -451,21 +459,26 @@ class GoalTrainer(trainer_lib.Trainer):
                              for n in range(len(rooms.GRAPH_NODES))])
         advantage = torch.as_tensor((won - baseline[node_of])[fresh["episode"]], dtype=torch.float32)
         rng = np.random.default_rng(c.seed + self.iteration)
+        batches = [np.sort(order[start:start + c.batch])
+                   for order in [rng.permutation(len(fresh["label"]))] for start in range(0, len(order), c.batch)]
+        with torch.no_grad():  # each chosen goal's log-probability under the weights that sampled it
+            old_logp = torch.zeros(len(fresh["label"]))
+            for idx in batches:
+                old_logp[idx] = self._choice_logp(fresh, idx)[0]
         self.model.train()
         pg_losses, bc_losses = [], []
-        order = rng.permutation(len(fresh["label"]))
-        for start in range(0, len(order), c.batch):
-            idx = np.sort(order[start:start + c.batch])
-            with self._autocast():
-                logits = self.model(unpack_maps(fresh["maps"][idx], self.model.config.input_channels),
-                                    torch.as_tensor(fresh["node"][idx]), _bits(c, fresh, idx)).float()
+        for idx in batches:
+            logp, logits = self._choice_logp(fresh, idx)
             bc = goal_loss(logits, torch.as_tensor(fresh["label"][idx]), c.label_sigma)
-            choice = torch.as_tensor(fresh["choice"][idx])
-            chose = choice >= 0
+            chose = torch.as_tensor(fresh["choice"][idx] >= 0)
             pg = torch.zeros(())
             if chose.any():
-                logp = F.log_softmax(logits[chose] / c.temperature, dim=1)
-                pg = -(advantage[idx][chose] * logp.gather(1, choice[chose, None])[:, 0]).mean()
+                gain, logp = advantage[idx][chose], logp[chose]
+                if c.clip:
+                    ratio = torch.exp(logp - old_logp[idx][chose])
+                    pg = -torch.minimum(ratio * gain, ratio.clamp(1 - c.clip, 1 + c.clip) * gain).mean()
+                else:
+                    pg = -(gain * logp).mean()
             loss = pg + c.bc_coef * bc
             self.optimizer.zero_grad()
             loss.backward()
@@ -478,6 +491,17 @@ class GoalTrainer(trainer_lib.Trainer):
                 "loss": float(np.mean(bc_losses)), "pg_loss": float(np.mean(pg_losses)), "potential_loss": float("nan"),
                 "accuracy": float("nan"), "collect_seconds": collect_seconds,
                 "train_seconds": time.perf_counter() - t0 - collect_seconds}
+
+    def _choice_logp(self, samples: dict[str, np.ndarray], idx: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        """The log-probability at ``temperature`` of each sample's chosen goal (0 where none was chosen),
+        and the goal logits, for samples ``idx``."""
+        c = self.config
+        with self._autocast():
+            logits = self.model(unpack_maps(samples["maps"][idx], self.model.config.input_channels),
+                                torch.as_tensor(samples["node"][idx]), _bits(c, samples, idx)).float()
+        choice = torch.as_tensor(samples["choice"][idx])
+        logp = F.log_softmax(logits / c.temperature, dim=1).gather(1, choice.clamp(min=0)[:, None])[:, 0]
+        return torch.where(choice >= 0, logp, torch.zeros(())), logits
 
     def _dagger(self) -> dict:
         """One DAgger round: collect, add to the dataset on disk, train ``epochs`` passes over all of it."""
