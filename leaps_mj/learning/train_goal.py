@@ -125,7 +125,7 @@ class GoalTrainConfig:
         no dataset is aggregated. For fine-tuning a DAgger network (``init_from``).
       clip: With ``reinforce``, the PPO clip range of the probability ratio of each chosen goal to its
         probability before the round's update (0: the plain policy gradient, unbounded; session 25 saw
-        it blow up within one round of 1,200 episodes: the log-probability of failed goals is pushed
+        it blow up within one round of 1,200 episodes at lr 1e-3: the log-probability of failed goals is pushed
         towards minus infinity).
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
       temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
