@@ -461,10 +461,11 @@ class GoalTrainer(trainer_lib.Trainer):
         rng = np.random.default_rng(c.seed + self.iteration)
         batches = [np.sort(order[start:start + c.batch])
                    for order in [rng.permutation(len(fresh["label"]))] for start in range(0, len(order), c.batch)]
-        with torch.no_grad():  # each chosen goal's log-probability under the weights that sampled it
-            old_logp = torch.zeros(len(fresh["label"]))
-            for idx in batches:
-                old_logp[idx] = self._choice_logp(fresh, idx)[0]
+        old_logp = torch.zeros(len(fresh["label"]))  # each chosen goal's log-probability under the sampling weights
+        if c.clip:  # only the clipped objective reads it: the plain gradient skips this pass over the round
+            with torch.no_grad():
+                for idx in batches:
+                    old_logp[idx] = self._choice_logp(fresh, idx)[0]
         self.model.train()
         pg_losses, bc_losses = [], []
         for idx in batches:
