@@ -22,8 +22,13 @@ Prints one table, every row measured in this run, interleaved over rounds
   missing.
 * ``vector W x K``: total steps/s of ``W`` worker processes holding ``K``
   environments each (:class:`leaps_mj.environment.vector.VectorEnv`: one
-  message per worker per step, frames through shared memory); ``rel`` is
-  against the one in-process environment.
+  message per worker per step, frames through shared memory), every worker
+  stepped in lock-step; ``vector W x K async``: the same served through
+  ``recv`` / ``send``, each worker stepped again as soon as it replies.
+  ``pin``: each worker bound to one CPU (``VectorEnv(pin=True)``).
+  Their ``rel`` is the median over rounds of the ratio to one in-process
+  environment measured right before each round (the other rows' ``rel``
+  compare medians).
 
     python benchmarks/env_throughput.py [--dataset roomnav-v2] [--seconds 3] [--rounds 3]
 """
@@ -110,15 +115,34 @@ def miniworld_stepper(width, height, seed=0):
     return step, None
 
 
-def vector_rate(dataset, workers, per_worker, width, height, seconds):
+def vector_rates(dataset, workers, per_worker, width, height, seconds, rounds, single, mode="lock-step", pin=False):
+    """Median steps/s of a vector env, and its median ratio to ``single`` (one in-process environment's
+    stepper) measured right before it in each round."""
     n = workers * per_worker
+    rates, ratios = [], []
     with vector.VectorEnv(n, seed=0, num_workers=workers, dataset=dataset, split="train", width=width,
-                          height=height, horizon=10**9) as venv:
-        venv.reset()
+                          height=height, horizon=10**9, pin=pin) as venv:
         rng = np.random.default_rng(0)
-        step = lambda: venv.step(list(rng.integers(rooms.NUM_ACTIONS, size=n)))  # noqa: E731
+        if mode == "lock-step":
+            venv.reset()
+            step = lambda: venv.step(list(rng.integers(rooms.NUM_ACTIONS, size=n)))  # noqa: E731
+        else:  # serve whichever worker finished first
+            venv.async_reset()
+
+            def step():
+                ids, _ = venv.recv()
+                venv.send(ids, list(rng.integers(rooms.NUM_ACTIONS, size=len(ids))))
         _rate(step, 0.5)  # warm-up: compiles each worker's first houses
-        return n * _rate(step, seconds)
+        for _ in range(rounds):
+            alone = _rate(single, seconds)
+            # Each async step serves one worker's per_worker environments; a lock-step one all n.
+            rates.append((n if mode == "lock-step" else per_worker) * _rate(step, seconds))
+            ratios.append(rates[-1] / alone)
+    return statistics.median(rates), statistics.median(ratios)
+
+
+#: How the vector rows with several workers are stepped: (lock-step or async, workers pinned to CPUs).
+VARIANTS = (("lock-step", False), ("async", False), ("lock-step", True), ("async", True))
 
 
 #: Steps one environment for argv[4] seconds after a warm-up and prints its steps/s.
@@ -159,7 +183,7 @@ def main(argv=None):
     p.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--workers", type=int, nargs="*", default=[1, 2], help="worker processes of the vector rows")
-    p.add_argument("--per-worker", type=int, nargs="*", default=[1, 4], help="environments per worker")
+    p.add_argument("--per-worker", type=int, nargs="*", default=[1, 4, 8], help="environments per worker")
     args = p.parse_args(argv)
 
     rows, notes = [], []
@@ -190,17 +214,23 @@ def main(argv=None):
         for backend, v in backends.items():
             rows.append((f"{width}x{height}", f"{backend} process", f"{v:,.0f}", f"{v / backends['egl']:.2f}"
                          if "egl" in backends else "-"))
+        single_env, single, _ = roomnav_stepper(args.dataset, width, height)
+        _rate(single, 0.5)
         for w in args.workers:
             for k in args.per_worker:
-                v = vector_rate(args.dataset, w, k, width, height, args.seconds)
-                rows.append((f"{width}x{height}", f"vector {w} x {k}", f"{v:,.0f}", f"{v / med['roomnav']:.2f}"))
+                for mode, pin in (VARIANTS if w > 1 else VARIANTS[:1]):
+                    v, ratio = vector_rates(args.dataset, w, k, width, height, args.seconds, args.rounds, single,
+                                            mode, pin)
+                    name = f"vector {w} x {k}" + (" async" if mode == "async" else "") + (" pin" if pin else "")
+                    rows.append((f"{width}x{height}", name, f"{v:,.0f}", f"{ratio:.2f}"))
+        single_env.close()
 
     print(f"\nsteps/s, median of {args.rounds} interleaved rounds of {args.seconds:g} s "
           "(rel = rate / roomnav single-process rate at that resolution)\n")
-    print(f"| {'resolution':<10} | {'what':<14} | {'steps/s':>9} | {'rel':>6} |")
-    print(f"|{'-' * 12}|{'-' * 16}|{'-' * 11}|{'-' * 8}|")
+    print(f"| {'resolution':<10} | {'what':<22} | {'steps/s':>9} | {'rel':>6} |")
+    print(f"|{'-' * 12}|{'-' * 24}|{'-' * 11}|{'-' * 8}|")
     for r in rows:
-        print(f"| {r[0]:<10} | {r[1]:<14} | {r[2]:>9} | {r[3]:>6} |")
+        print(f"| {r[0]:<10} | {r[1]:<22} | {r[2]:>9} | {r[3]:>6} |")
     print()
     print("\n".join(notes))
 

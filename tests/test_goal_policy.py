@@ -661,3 +661,22 @@ def test_the_potential_loss_is_smooth_l1_at_the_median_and_fits_other_quantiles(
         assert abs(values[int(np.argmin(losses))].item() - expected) < 0.11
     with pytest.raises(ValueError, match="potential_quantile 1.0"):
         train_goal.GoalTrainConfig(potential_quantile=1.0)
+
+
+def test_progress_credit_gives_each_choice_the_metres_its_walk_bought():
+    # Episode 0 (node 2): choices at steps 0 and 2; 5 -> 4 m under the first, 4 -> 3 m under the second.
+    # Episode 1 (node 2): one choice at step 0 that walked away, 5 -> 6 m.
+    samples = {"choice": np.array([7, -1, 9, -1, 4, -1]), "episode": np.array([0, 0, 0, 0, 1, 1]),
+               "node": np.full(6, 2), "distance": np.array([5.0, 4.5, 4.0, 3.5, 5.0, 5.5], np.float32),
+               "final_distance": np.array([3.0, 6.0], np.float32), "success": np.array([True, False])}
+    gamma = 0.5
+    returns = np.array([1.0 + gamma * 1.0, 1.0, -1.0])  # discounted progress from each choice on
+    expected = np.zeros(6)
+    expected[[0, 2, 4]] = (returns - returns.mean()) / (returns - returns.mean()).std()
+    np.testing.assert_allclose(train_goal.choice_advantages(samples, "progress", gamma), expected)
+    # The episode credit shares one success bit, minus the node's mean, among all steps of the episode.
+    np.testing.assert_allclose(train_goal.choice_advantages(samples, "episode", gamma), [0.5] * 4 + [-0.5] * 2)
+    with pytest.raises(ValueError, match="credit 'value'"):
+        dataclasses.replace(train_goal.PRESETS["tiny"], credit="value")
+    with pytest.raises(ValueError, match="credit_gamma 1.5"):
+        dataclasses.replace(train_goal.PRESETS["tiny"], credit_gamma=1.5)

@@ -1,5 +1,7 @@
 """Vectorised environments and the gymnasium adapter."""
 
+import os
+
 import gymnasium
 import numpy as np
 import pytest
@@ -41,6 +43,42 @@ def test_vector_env_results_do_not_depend_on_the_grouping(tiny_dataset):
         assert a[0] == b[0] and a[1] == b[1]
         np.testing.assert_array_equal(a[2], b[2])
         np.testing.assert_array_equal(a[3], b[3])
+
+
+def test_vector_env_async_steps_each_worker_alone_and_matches_the_lock_step(tiny_dataset):
+    kwargs = dict(dataset=str(tiny_dataset), split="train", horizon=6, width=32, height=24)
+    actions = lambda k: [k % 9, (k + 3) % 9, 8, (2 * k) % 9]  # noqa: E731
+    with vector.VectorEnv(4, seed=2, num_workers=1, **kwargs) as venv:
+        lock_step = [venv.reset()] + [venv.step(actions(k)) for k in range(8)]
+    with vector.VectorEnv(4, seed=2, num_workers=2, pin=True, **kwargs) as venv:
+        cpus = sorted(os.sched_getaffinity(0))
+        assert [os.sched_getaffinity(p.pid) for p in venv._procs] == [{cpus[0]}, {cpus[1 % len(cpus)]}]
+        venv.async_reset()
+        steps = {0: [], 1: []}  # per worker: its time steps in order
+        while min(len(v) for v in steps.values()) < 9:
+            ids, timesteps = venv.recv()
+            w = ids[0] // 2
+            steps[w].append(timesteps)
+            if len(steps[w]) < 9:
+                k = len(steps[w]) - 1
+                venv.send(ids, [actions(k)[i] for i in ids])
+        with pytest.raises(RuntimeError, match="nothing pending"):
+            venv.recv()
+        venv.send([0, 1], [8, 8])
+        with pytest.raises(RuntimeError, match="worker 0 .* still stepping"):
+            venv.send([0, 1], [8, 8])
+        with pytest.raises(RuntimeError, match="still stepping"):
+            venv.step([8, 8, 8, 8])
+        with pytest.raises(ValueError, match=r"env_ids \[1, 2\]: expected one worker's environments"):
+            venv.send([1, 2], [8, 8])
+        with pytest.raises(ValueError, match="got 1 actions"):
+            venv.send([2, 3], [8])
+    # Each environment's trajectory is the lock-step one, whichever worker finished first.
+    for k in range(9):
+        for i in range(4):
+            a, b = lock_step[k][i], steps[i // 2][k][i % 2]
+            assert a.step_type == b.step_type and a.reward == b.reward
+            np.testing.assert_array_equal(a.observation["depth"], b.observation["depth"])
 
 
 def test_vector_env_rejects_bad_worker_counts_and_frees_its_shared_memory(tiny_dataset):

@@ -20,7 +20,8 @@ nothing to the learner, and a sample is reused ``epochs`` times per round.
 ``--method reinforce --init-from DIR`` fine-tunes a trained network instead: every round's
 episodes are driven by goals sampled from it, and it takes a policy-gradient step towards the
 goals of the episodes that succeeded (REINFORCE with a per-node mean baseline, each goal's
-probability ratio clipped as in PPO so that a round cannot drive it to zero), kept near the
+probability ratio clipped as in PPO so that a round cannot drive it to zero), or with ``--credit
+progress`` towards the goals whose walk brought the agent geodesically nearer, kept near the
 teacher by a cross-entropy term; this optimises the hop success itself rather than agreement
 with a teacher the network cannot always read.
 
@@ -58,6 +59,9 @@ from leaps_mj.world import rooms
 
 #: The learner's arithmetic (``GoalTrainConfig.precision``): float32, or bfloat16 CPU autocast.
 PRECISIONS = ("fp32", "bf16")
+
+#: How ``reinforce`` credits a goal choice (``GoalTrainConfig.credit``; see :func:`choice_advantages`).
+CREDITS = ("episode", "progress")
 
 #: The goal teachers by name (``GoalTrainConfig.teacher``).
 TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals,
@@ -127,6 +131,11 @@ class GoalTrainConfig:
         probability before the round's update (0: the plain policy gradient, unbounded; session 25 saw
         it blow up within one round of 1,200 episodes at lr 1e-3: the log-probability of failed goals is pushed
         towards minus infinity).
+      credit: How ``reinforce`` credits a goal choice (:func:`choice_advantages`): ``episode``, the
+        episode's success shared by all of its choices, or ``progress``, the geodesic metres towards the
+        target walked while the choice and those after it drove, discounted by ``credit_gamma`` per
+        choice (a privileged signal used only in training, so each choice is credited for what it bought).
+      credit_gamma: Discount per later goal choice of the ``progress`` credit.
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
       temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
         argmax the sub-policy acts with).
@@ -174,6 +183,8 @@ class GoalTrainConfig:
     temperature: float = 0.5
     bc_coef: float = 0.5
     clip: float = 0.2
+    credit: str = "episode"
+    credit_gamma: float = 0.7
     commit_turns: bool = False
     horizon: int = 60
     max_start_doors: int = 2
@@ -206,6 +217,10 @@ class GoalTrainConfig:
             raise ValueError(f"precision {self.precision!r}: expected 'fp32' or 'bf16'")
         if self.method not in ("dagger", "reinforce"):
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
+        if self.credit not in CREDITS:
+            raise ValueError(f"credit {self.credit!r}: expected one of {CREDITS}")
+        if not 0.0 <= self.credit_gamma <= 1.0:
+            raise ValueError(f"credit_gamma {self.credit_gamma!r}: expected a value in [0, 1]")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta {self.beta!r}: expected a value in [0, 1]")
         if not self.label_sigma >= 0:
@@ -256,8 +271,9 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
       (N, NUM_ROOM_TYPES) uint8 room-type bits, ``node`` (N,) and ``label`` (N,) ints, ``choice`` (N,) the goal chosen at each
       step (-1 where none was), ``episode`` (N,) each step's episode index; with ``config.potential``,
       ``potential`` (N, WINDOW, WINDOW) int8 the potential labels;
+      ``distance`` (N,) the geodesic metres to the target before each step's action;
       ``success`` (E,) and ``teacher`` (E,) bools: whether each episode
-      succeeded and whether the teacher drove it.
+      succeeded and whether the teacher drove it, ``final_distance`` (E,) its last geodesic distance.
     """
     torch.set_num_threads(1)
     rng = np.random.default_rng(seed)
@@ -272,6 +288,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, bits, nodes, labels, potentials, choices, episode_of, success, driven = [], [], [], [], [], [], [], [], []
+    distance, final_distance = [], []
     try:
         for episode in range(episodes):
             ts = env.reset()
@@ -291,6 +308,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                 nodes.append(driver.node)
                 labels.append(label)
                 episode_of.append(episode)
+                distance.append(env.task.distance)
                 choice = -1
                 if driver.needs_goal():
                     if by_teacher:
@@ -307,6 +325,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                 choices.append(choice)
                 ts = env.step(driver.act())
             success.append(bool(env.task.success))
+            final_distance.append(env.task.distance)
             driven.append(by_teacher)
     finally:
         env.close()
@@ -314,10 +333,46 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                "node": np.asarray(nodes, np.int64),
                "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
                "episode": np.asarray(episode_of, np.int64), "success": np.asarray(success, bool),
-               "teacher": np.asarray(driven, bool)}
+               "teacher": np.asarray(driven, bool), "distance": np.asarray(distance, np.float32),
+               "final_distance": np.asarray(final_distance, np.float32)}
     if config.potential:
         samples["potential"] = np.asarray(potentials, np.int8).reshape(-1, mapping.WINDOW, mapping.WINDOW)
     return samples
+
+
+def choice_advantages(samples: dict[str, np.ndarray], credit: str, gamma: float) -> np.ndarray:
+    """Each sample's advantage for the policy gradient of ``reinforce`` (0 where no goal was chosen).
+
+    ``episode``: the episode's success minus the mean success of the episodes of its node, shared by
+    every choice of the episode (one bit for all of them). ``progress``: choice ``j`` of an episode
+    drove from its step to the next choice's (the last one to the end); its return is
+    ``sum_k gamma**k * progress[j + k]``, the geodesic metres towards the target walked under it and
+    the choices after it, and the advantage is that return minus the mean return of its node's
+    choices in the round, divided by the standard deviation of all of them. The distances come from
+    the simulator: privileged, used only as the training signal.
+    """
+    node_of = np.zeros(len(samples["success"]), np.int64)
+    node_of[samples["episode"]] = samples["node"]
+    nodes = len(rooms.GRAPH_NODES)
+    if credit == "episode":
+        won = samples["success"].astype(np.float64)
+        baseline = np.array([won[node_of == n].mean() if (node_of == n).any() else 0.0 for n in range(nodes)])
+        return (won - baseline[node_of])[samples["episode"]]
+    chosen = np.flatnonzero(samples["choice"] >= 0)
+    returns = np.zeros(len(samples["choice"]))
+    for episode in np.unique(samples["episode"][chosen]):
+        steps = chosen[samples["episode"][chosen] == episode]
+        after = np.append(samples["distance"][steps[1:]], samples["final_distance"][episode])
+        progress = samples["distance"][steps].astype(np.float64) - after
+        running = 0.0
+        for k in range(len(steps) - 1, -1, -1):
+            running = progress[k] + gamma * running
+            returns[steps[k]] = running
+    node = samples["node"][chosen]
+    baseline = np.array([returns[chosen][node == n].mean() if (node == n).any() else 0.0 for n in range(nodes)])
+    advantage = np.zeros_like(returns)
+    advantage[chosen] = returns[chosen] - baseline[node]
+    return advantage / max(float(advantage[chosen].std()) if len(chosen) else 0.0, 1e-6)
 
 
 def _bits(config: GoalTrainConfig, samples: dict[str, np.ndarray], idx: np.ndarray) -> torch.Tensor | None:
@@ -453,11 +508,7 @@ class GoalTrainer(trainer_lib.Trainer):
         fresh = self._collect()
         collect_seconds = time.perf_counter() - t0
         won = fresh["success"].astype(np.float64)
-        node_of = np.zeros(len(won), np.int64)
-        node_of[fresh["episode"]] = fresh["node"]
-        baseline = np.array([won[node_of == n].mean() if (node_of == n).any() else 0.0
-                             for n in range(len(rooms.GRAPH_NODES))])
-        advantage = torch.as_tensor((won - baseline[node_of])[fresh["episode"]], dtype=torch.float32)
+        advantage = torch.as_tensor(choice_advantages(fresh, c.credit, c.credit_gamma), dtype=torch.float32)
         rng = np.random.default_rng(c.seed + self.iteration)
         batches = [np.sort(order[start:start + c.batch])
                    for order in [rng.permutation(len(fresh["label"]))] for start in range(0, len(order), c.batch)]
