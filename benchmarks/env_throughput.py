@@ -26,9 +26,11 @@ Prints one table, every row measured in this run, interleaved over rounds
   stepped in lock-step; ``vector W x K async``: the same served through
   ``recv`` / ``send``, each worker stepped again as soon as it replies.
   ``pin``: each worker bound to one CPU (``VectorEnv(pin=True)``).
-  Their ``rel`` is the median over rounds of the ratio to one in-process
-  environment measured right before each round (the other rows' ``rel``
-  compare medians).
+  Their ``rel`` is the median over rounds of the ratio to the same ``W * K``
+  environments (same seeds, so the same houses) stepped in turn in this
+  process, measured right before each round: the houses differ in drawing
+  cost, so a single environment of another house is no baseline (the other
+  rows' ``rel`` compare medians with ``roomnav``).
 
     python benchmarks/env_throughput.py [--dataset roomnav-v2] [--seconds 3] [--rounds 3]
 """
@@ -115,11 +117,30 @@ def miniworld_stepper(width, height, seed=0):
     return step, None
 
 
-def vector_rates(dataset, workers, per_worker, width, height, seconds, rounds, single, mode="lock-step", pin=False):
-    """Median steps/s of a vector env, and its median ratio to ``single`` (one in-process environment's
-    stepper) measured right before it in each round."""
+def in_process_stepper(dataset, num_envs, width, height):
+    """Environments ``0 .. num_envs - 1`` of a vector env (the same seeds, so the same houses), stepped in
+    turn in this process: what the vector env is compared with."""
+    envs = [leaps_mj.load(dataset, "train", seed=i, width=width, height=height, horizon=10**9)
+            for i in range(num_envs)]
+    for env in envs:
+        env.reset()
+    rng = np.random.default_rng(0)
+    turn = [0]
+
+    def step():
+        envs[turn[0] % num_envs].step(int(rng.integers(rooms.NUM_ACTIONS)))
+        turn[0] += 1
+
+    return envs, step
+
+
+def vector_rates(dataset, workers, per_worker, width, height, seconds, rounds, mode="lock-step", pin=False):
+    """Median steps/s of a vector env, and its median ratio to the same environments stepped in turn in
+    this process, measured right before it in each round."""
     n = workers * per_worker
     rates, ratios = [], []
+    envs, single = in_process_stepper(dataset, n, width, height)
+    _rate(single, 0.5)
     with vector.VectorEnv(n, seed=0, num_workers=workers, dataset=dataset, split="train", width=width,
                           height=height, horizon=10**9, pin=pin) as venv:
         rng = np.random.default_rng(0)
@@ -138,6 +159,8 @@ def vector_rates(dataset, workers, per_worker, width, height, seconds, rounds, s
             # Each async step serves one worker's per_worker environments; a lock-step one all n.
             rates.append((n if mode == "lock-step" else per_worker) * _rate(step, seconds))
             ratios.append(rates[-1] / alone)
+    for env in envs:
+        env.close()
     return statistics.median(rates), statistics.median(ratios)
 
 
@@ -214,19 +237,17 @@ def main(argv=None):
         for backend, v in backends.items():
             rows.append((f"{width}x{height}", f"{backend} process", f"{v:,.0f}", f"{v / backends['egl']:.2f}"
                          if "egl" in backends else "-"))
-        single_env, single, _ = roomnav_stepper(args.dataset, width, height)
-        _rate(single, 0.5)
         for w in args.workers:
             for k in args.per_worker:
                 for mode, pin in (VARIANTS if w > 1 else VARIANTS[:1]):
-                    v, ratio = vector_rates(args.dataset, w, k, width, height, args.seconds, args.rounds, single,
-                                            mode, pin)
+                    v, ratio = vector_rates(args.dataset, w, k, width, height, args.seconds, args.rounds, mode,
+                                            pin)
                     name = f"vector {w} x {k}" + (" async" if mode == "async" else "") + (" pin" if pin else "")
                     rows.append((f"{width}x{height}", name, f"{v:,.0f}", f"{ratio:.2f}"))
-        single_env.close()
 
     print(f"\nsteps/s, median of {args.rounds} interleaved rounds of {args.seconds:g} s "
-          "(rel = rate / roomnav single-process rate at that resolution)\n")
+          "(rel = rate / roomnav single-process rate at that resolution; for the vector rows, "
+          "median ratio to the same environments stepped in turn in this process)\n")
     print(f"| {'resolution':<10} | {'what':<22} | {'steps/s':>9} | {'rel':>6} |")
     print(f"|{'-' * 12}|{'-' * 24}|{'-' * 11}|{'-' * 8}|")
     for r in rows:

@@ -136,7 +136,7 @@ class VectorEnv:
       num_workers: worker processes (default: one per core, at most ``num_envs``).
       pin: whether worker ``w`` is bound to the ``w``-th CPU this process may run on (round robin).
         A worker that blocks on its pipe every step is otherwise moved between cores by the scheduler
-        and loses its caches; on the 2-core machine pinning made 2 workers 1.2-1.3x faster
+        and loses its caches; on the 2-core machine pinning made 2 workers 1.05-1.26x faster
         (``benchmarks/env_throughput.py``). Leave it off where other pinned work shares the CPUs.
       **env_kwargs: passed to ``make_env`` (dataset, split, config).
 
