@@ -105,6 +105,9 @@ def test_main_runs_resumes_and_pairs_with_a_baseline(hop_dataset, tmp_path, monk
     assert summary["config"]["episodes"] == "hops"
     by_distance = summary["success"]["oracle"]["20"]
     assert sum(by_distance[d]["all"]["n"] for d in by_distance) == 4
+    by_metres = summary["by_geodesic"]["oracle"]
+    assert sum(r["n"] for bins in by_metres.values() for r in bins.values()) == 4
+    assert "## By the start's geodesic distance, ≤ 20" in table
     capsys.readouterr()
 
     def no_more_episodes(*args, **kwargs):
@@ -267,3 +270,18 @@ def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(load_tool, hop_
     assert f"{len(group_of)} hop episodes 1 door(s) away" in out and "| oracle |" in out
     assert tool.main(["--dataset", str(dataset), "--split", "valid", str(tmp_path / "run")]) == 2
     assert "expected the hop episodes of" in capsys.readouterr().err
+
+
+def test_success_by_the_starts_geodesic_distance_bins_every_start_once():
+    def row(episode, doors, metres, step):
+        return {"episode": episode, "plan_length": doors, "geodesic": metres, "success_step": step, "steps": 60}
+
+    table = {"pure": [row(0, 1, 2.0, 10), row(1, 1, 4.9, None), row(2, 1, 7.5, 50), row(3, 1, 31.0, None),
+                      row(4, 2, 5.0, 70)],
+             "oracle": [row(0, 1, 2.0, 5), row(1, 1, 4.9, 8), row(2, 1, 7.5, 20), row(3, 1, 31.0, 58),
+                        row(4, 2, 5.0, 30)]}
+    out = hops.by_geodesic(table, 60)
+    assert list(out["pure"]["1"]) == ["0-5 m", "5-10 m", ">= 15 m"]  # the empty 10-15 m bin is left out
+    assert [(r["n"], r["successes"]) for r in out["pure"]["1"].values()] == [(2, 1), (1, 1), (1, 0)]
+    assert out["pure"]["2"]["5-10 m"]["successes"] == 0  # 70 steps is past the horizon
+    assert out["oracle"]["1"][">= 15 m"]["successes"] == 1

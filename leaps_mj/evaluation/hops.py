@@ -61,6 +61,8 @@ AGENTS = ("pure", "oracle", "oracle-scan", "oracle-look", "oracle-map", "oracle-
 SUBSETS = {"full": None, "smoke": 1}
 #: The label of a run's sub-policy results, the one paired with a baseline's.
 PAIRED_LABEL = "pure"
+#: Edges (metres) of the bins of the start's geodesic distance in :func:`by_geodesic`: fixed, so that runs compare.
+GEODESIC_EDGES = (0.0, 5.0, 10.0, 15.0, math.inf)
 
 
 def _stratum(spec) -> tuple[int, int]:
@@ -98,6 +100,35 @@ def summarize(table: dict[str, list[dict]], horizons) -> dict:
         for h in horizons:
             s = stats.success_at(rows, h)
             out[label][str(h)] = _per_group(groups, lambda m, s=s: stats.rate(s[m]))
+    return out
+
+
+def _bin_name(lo: float, hi: float) -> str:
+    return f"{lo:g}-{hi:g} m" if math.isfinite(hi) else f">= {lo:g} m"
+
+
+def by_geodesic(table: dict[str, list[dict]], horizon: int) -> dict:
+    """Success within ``horizon`` per agent, door distance and bin of the start's geodesic distance.
+
+    A door away can mean 2 m or 30 m (a garage across a yard): these bins (:data:`GEODESIC_EDGES`) show
+    whether an agent fails on choosing the way or on hops that 60 steps cannot walk.
+
+    Returns:
+      ``{label: {str(d): {"lo-hi m": rate}}}`` (empty bins left out).
+    """
+    out = {}
+    for label, rows in table.items():
+        s = stats.success_at(rows, horizon)
+        doors = np.array([r["plan_length"] for r in rows])
+        metres = np.array([r["geodesic"] for r in rows], dtype=float)
+        out[label] = {}
+        for d in sorted(set(doors.tolist())):
+            bins = {}
+            for lo, hi in zip(GEODESIC_EDGES[:-1], GEODESIC_EDGES[1:]):
+                m = (doors == d) & (metres >= lo) & (metres < hi)
+                if m.any():
+                    bins[_bin_name(lo, hi)] = stats.rate(s[m])
+            out[label][str(d)] = bins
     return out
 
 
@@ -175,8 +206,9 @@ def _policy_name(config: harness.EvalConfig) -> str:
 
 
 def markdown(summary: dict, horizons, config: harness.EvalConfig, comparison: dict | None = None,
-             baseline: pathlib.Path | None = None) -> str:
-    """The hop results as markdown: overall, per node for each distance, and the paired comparison."""
+             baseline: pathlib.Path | None = None, geodesic: dict | None = None) -> str:
+    """The hop results as markdown: overall, per node for each distance, by the start's geodesic distance
+    (``geodesic``: :func:`by_geodesic` at the longest horizon), and the paired comparison."""
     labels = list(summary)
     hs = [str(h) for h in horizons]
     distances = list(summary[labels[0]][hs[0]])
@@ -203,6 +235,14 @@ def markdown(summary: dict, horizons, config: harness.EvalConfig, comparison: di
             n_node = summary[labels[0]][hs[0]][d]["node"][node]["n"]
             lines.append(f"| {node} | {n_node} | " + " | ".join(
                 _cell(summary[label][h][d]["node"][node]) for label in labels for h in hs) + " |")
+    if geodesic is not None:
+        lines += ["", f"## By the start's geodesic distance, ≤ {hs[-1]}", "",
+                  "| doors | metres | n | " + " | ".join(labels) + " |",
+                  "|---|---|---:|" + "---|" * len(labels)]
+        for d in distances:
+            for name, r in geodesic[labels[0]][d].items():
+                lines.append(f"| {_doors(d)} | {name} | {r['n']} | " + " | ".join(
+                    _cell(geodesic[label][d][name]) for label in labels) + " |")
     if comparison is not None:
         lines += ["", f"## Paired with the baseline `{baseline}` ({PAIRED_LABEL} vs {PAIRED_LABEL})", "",
                   "Exact McNemar (sign) test on the same episodes, two-sided.", "",
@@ -272,13 +312,15 @@ def report(table, horizons, config, out: pathlib.Path, baseline: pathlib.Path | 
     baseline's own (see :func:`load_baseline`).
     """
     summary = summarize(table, horizons)
+    geodesic = by_geodesic(table, max(horizons))
     comparison, base_summary = None, None
     if baseline is not None:
         base = load_baseline(baseline, config, table[PAIRED_LABEL])
         comparison = compare(table[PAIRED_LABEL], base, horizons)
         base_summary = summarize({PAIRED_LABEL: base}, horizons)[PAIRED_LABEL]
-    files.write_atomic(out / "results.md", markdown(summary, horizons, config, comparison, baseline).encode())
-    doc = {"config": config.to_json(), "horizons": list(horizons), "success": summary}
+    files.write_atomic(out / "results.md", markdown(summary, horizons, config, comparison, baseline,
+                                                              geodesic).encode())
+    doc = {"config": config.to_json(), "horizons": list(horizons), "success": summary, "by_geodesic": geodesic}
     if comparison is not None:
         doc["baseline"] = {"folder": str(baseline), "success": base_summary, "paired": comparison}
     files.write_atomic(out / "summary.json", (json.dumps(doc, indent=1) + "\n").encode())
