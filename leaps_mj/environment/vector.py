@@ -262,7 +262,7 @@ class VectorEnv:
 
     def async_reset(self) -> None:
         """Starts resetting every environment without waiting; collect the FIRST time steps with :meth:`recv`."""
-        self._send("reset", None, [w for w in range(self.num_workers)])
+        self._send("reset", None, range(self.num_workers))
 
     def recv(self) -> tuple[list[int], list[dm_env.TimeStep]]:
         """Waits for the first worker to finish its pending reset or step (asynchronous use).
