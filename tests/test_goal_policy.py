@@ -680,3 +680,13 @@ def test_progress_credit_gives_each_choice_the_metres_its_walk_bought():
         dataclasses.replace(train_goal.PRESETS["tiny"], credit="value")
     with pytest.raises(ValueError, match="credit_gamma 1.5"):
         dataclasses.replace(train_goal.PRESETS["tiny"], credit_gamma=1.5)
+
+
+def test_min_start_distance_reaches_the_training_episodes(tiny_dataset):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), min_start_distance=3.0,
+                                 max_start_distance=13.0, episodes=2)
+    samples = train_goal.collect(config, str(tiny_dataset / "train"), seed=0, episodes=2, beta=1.0, state_dict=None)
+    first = np.flatnonzero(np.diff(samples["episode"], prepend=-1))  # each episode's first step
+    assert (samples["distance"][first] >= 3.0).all()  # without the option the first start is 2.0 m away
+    with pytest.raises(ValueError, match="min_start_distance 13.0"):
+        dataclasses.replace(train_goal.PRESETS["tiny"], min_start_distance=13.0)

@@ -146,6 +146,7 @@ class GoalTrainConfig:
       horizon: Steps of a training episode.
       max_start_doors: Starts at most this many doors from a room of the target.
       max_start_distance: Starts at most this many metres (geodesic) from it.
+      min_start_distance: Starts at least this many metres (geodesic) from it (0: as near as the room allows).
       precision: Arithmetic of the learner's forward and backward passes: ``fp32``, or ``bf16`` (CPU
         autocast: convolutions and matrix products in bfloat16, which CPUs with AMX or AVX-512 BF16 run
         1.6-2x faster; weights, optimizer state, losses and the acting networks stay float32).
@@ -189,6 +190,7 @@ class GoalTrainConfig:
     horizon: int = 60
     max_start_doors: int = 2
     max_start_distance: float = 13.0
+    min_start_distance: float = 0.0
     precision: str = "fp32"
     seed: int = 0
 
@@ -219,6 +221,9 @@ class GoalTrainConfig:
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
         if self.credit not in CREDITS:
             raise ValueError(f"credit {self.credit!r}: expected one of {CREDITS}")
+        if not 0.0 <= self.min_start_distance < self.max_start_distance:
+            raise ValueError(f"min_start_distance {self.min_start_distance!r}: expected a value in "
+                             f"[0, max_start_distance={self.max_start_distance!r})")
         if not 0.0 <= self.credit_gamma <= 1.0:
             raise ValueError(f"credit_gamma {self.credit_gamma!r}: expected a value in [0, 1]")
         if not 0.0 <= self.beta <= 1.0:
@@ -284,7 +289,7 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
         net.eval()
     env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
                        horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
-                       max_start_distance=config.max_start_distance)
+                       max_start_distance=config.max_start_distance, min_start_distance=config.min_start_distance)
     teacher = TEACHERS[config.teacher](env, seed)
     drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, bits, nodes, labels, potentials, choices, episode_of, success, driven = [], [], [], [], [], [], [], [], []
