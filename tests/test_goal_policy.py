@@ -688,5 +688,11 @@ def test_min_start_distance_reaches_the_training_episodes(tiny_dataset):
     samples = train_goal.collect(config, str(tiny_dataset / "train"), seed=0, episodes=2, beta=1.0, state_dict=None)
     first = np.flatnonzero(np.diff(samples["episode"], prepend=-1))  # each episode's first step
     assert (samples["distance"][first] >= 3.0).all()  # without the option the first start is 2.0 m away
+    mixed = train_goal.collect(dataclasses.replace(config, far_fraction=0.5), str(tiny_dataset / "train"), seed=0,
+                               episodes=8, beta=1.0, state_dict=None)
+    first = np.flatnonzero(np.diff(mixed["episode"], prepend=-1))
+    assert (mixed["distance"][first] >= 3.0).any() and (mixed["distance"][first] < 3.0).any()
     with pytest.raises(ValueError, match="min_start_distance 13.0"):
         dataclasses.replace(train_goal.PRESETS["tiny"], min_start_distance=13.0)
+    with pytest.raises(ValueError, match="far_fraction 0"):
+        dataclasses.replace(train_goal.PRESETS["tiny"], far_fraction=0.0)

@@ -147,6 +147,8 @@ class GoalTrainConfig:
       max_start_doors: Starts at most this many doors from a room of the target.
       max_start_distance: Starts at most this many metres (geodesic) from it.
       min_start_distance: Starts at least this many metres (geodesic) from it (0: as near as the room allows).
+      far_fraction: The fraction of the training episodes ``min_start_distance`` applies to; the others start
+        as near as the room allows (a mixture of near and far starts).
       precision: Arithmetic of the learner's forward and backward passes: ``fp32``, or ``bf16`` (CPU
         autocast: convolutions and matrix products in bfloat16, which CPUs with AMX or AVX-512 BF16 run
         1.6-2x faster; weights, optimizer state, losses and the acting networks stay float32).
@@ -191,6 +193,7 @@ class GoalTrainConfig:
     max_start_doors: int = 2
     max_start_distance: float = 13.0
     min_start_distance: float = 0.0
+    far_fraction: float = 1.0
     precision: str = "fp32"
     seed: int = 0
 
@@ -224,6 +227,8 @@ class GoalTrainConfig:
         if not 0.0 <= self.min_start_distance < self.max_start_distance:
             raise ValueError(f"min_start_distance {self.min_start_distance!r}: expected a value in "
                              f"[0, max_start_distance={self.max_start_distance!r})")
+        if not 0.0 < self.far_fraction <= 1.0:
+            raise ValueError(f"far_fraction {self.far_fraction!r}: expected a value in (0, 1]")
         if not 0.0 <= self.credit_gamma <= 1.0:
             raise ValueError(f"credit_gamma {self.credit_gamma!r}: expected a value in [0, 1]")
         if not 0.0 <= self.beta <= 1.0:
@@ -287,15 +292,21 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
         net = nets.GoalNet(config.net_config)
         net.load_state_dict(state_dict)
         net.eval()
-    env = roomnav.load(seed=seed, houses_dir=houses_dir, width=config.width, height=config.height,
-                       horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
-                       max_start_distance=config.max_start_distance, min_start_distance=config.min_start_distance)
-    teacher = TEACHERS[config.teacher](env, seed)
+    def make(env_seed: int, min_start_distance: float):
+        env = roomnav.load(seed=env_seed, houses_dir=houses_dir, width=config.width, height=config.height,
+                           horizon=config.horizon, targets=rooms.GRAPH_NODES, max_start_doors=config.max_start_doors,
+                           max_start_distance=config.max_start_distance, min_start_distance=min_start_distance)
+        return env, TEACHERS[config.teacher](env, env_seed)
+
+    # The far starts' environment (all starts, unless min_start_distance is set), and with far_fraction < 1 a
+    # second one for the rest, whose starts may be as near as the room allows.
+    envs = [make(seed, config.min_start_distance)] + ([make(seed + 1, 0.0)] if config.far_fraction < 1 else [])
     drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, bits, nodes, labels, potentials, choices, episode_of, success, driven = [], [], [], [], [], [], [], [], []
     distance, final_distance = [], []
     try:
         for episode in range(episodes):
+            env, teacher = envs[0] if len(envs) == 1 or rng.random() < config.far_fraction else envs[1]
             ts = env.reset()
             target = env.task.episode.target
             driver = drivers.setdefault(target, map_navigation.GoalDriver(
@@ -333,7 +344,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
             final_distance.append(env.task.distance)
             driven.append(by_teacher)
     finally:
-        env.close()
+        for env, _ in envs:
+            env.close()
     samples = {"maps": np.asarray(maps, np.uint8), "bits": np.asarray(bits, np.uint8).reshape(-1, rooms.NUM_ROOM_TYPES),
                "node": np.asarray(nodes, np.int64),
                "label": np.asarray(labels, np.int64), "choice": np.asarray(choices, np.int64),
