@@ -298,8 +298,8 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
                            max_start_distance=config.max_start_distance, min_start_distance=min_start_distance)
         return env, TEACHERS[config.teacher](env, env_seed)
 
-    # The far starts' environment (all starts, unless min_start_distance is set), and with far_fraction < 1 a
-    # second one for the rest, whose starts may be as near as the room allows.
+    # envs[0] draws starts at least min_start_distance away (every episode's, when far_fraction is 1); with
+    # far_fraction < 1, envs[1] draws the other episodes' starts as near as the room allows.
     envs = [make(seed, config.min_start_distance)] + ([make(seed + 1, 0.0)] if config.far_fraction < 1 else [])
     drivers: dict[str, map_navigation.GoalDriver] = {}
     maps, bits, nodes, labels, potentials, choices, episode_of, success, driven = [], [], [], [], [], [], [], [], []
@@ -357,6 +357,11 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     return samples
 
 
+def _node_means(values: np.ndarray, node: np.ndarray) -> np.ndarray:
+    """The mean of ``values`` over the entries of each graph node (0 for a node with none): the baseline."""
+    return np.array([values[node == n].mean() if (node == n).any() else 0.0 for n in range(len(rooms.GRAPH_NODES))])
+
+
 def choice_advantages(samples: dict[str, np.ndarray], credit: str, gamma: float) -> np.ndarray:
     """Each sample's advantage for the policy gradient of ``reinforce`` (0 where no goal was chosen).
 
@@ -368,13 +373,11 @@ def choice_advantages(samples: dict[str, np.ndarray], credit: str, gamma: float)
     choices in the round, divided by the standard deviation of all of them. The distances come from
     the simulator: privileged, used only as the training signal.
     """
-    node_of = np.zeros(len(samples["success"]), np.int64)
-    node_of[samples["episode"]] = samples["node"]
-    nodes = len(rooms.GRAPH_NODES)
     if credit == "episode":
+        node_of = np.zeros(len(samples["success"]), np.int64)
+        node_of[samples["episode"]] = samples["node"]
         won = samples["success"].astype(np.float64)
-        baseline = np.array([won[node_of == n].mean() if (node_of == n).any() else 0.0 for n in range(nodes)])
-        return (won - baseline[node_of])[samples["episode"]]
+        return (won - _node_means(won, node_of)[node_of])[samples["episode"]]
     chosen = np.flatnonzero(samples["choice"] >= 0)
     returns = np.zeros(len(samples["choice"]))
     for episode in np.unique(samples["episode"][chosen]):
@@ -386,9 +389,8 @@ def choice_advantages(samples: dict[str, np.ndarray], credit: str, gamma: float)
             running = progress[k] + gamma * running
             returns[steps[k]] = running
     node = samples["node"][chosen]
-    baseline = np.array([returns[chosen][node == n].mean() if (node == n).any() else 0.0 for n in range(nodes)])
     advantage = np.zeros_like(returns)
-    advantage[chosen] = returns[chosen] - baseline[node]
+    advantage[chosen] = returns[chosen] - _node_means(returns[chosen], node)[node]
     return advantage / max(float(advantage[chosen].std()) if len(chosen) else 0.0, 1e-6)
 
 
