@@ -10,7 +10,7 @@ import torch
 import leaps_mj
 from leaps_mj.environment import expert, goal_teacher, map_navigation, mapping
 from leaps_mj.evaluation import registry
-from leaps_mj.learning import checkpoints, goal_policy, nets, train_goal
+from leaps_mj.learning import checkpoints, credit, goal_policy, nets, train_goal
 from leaps_mj.world import rooms
 
 W, H = 24, 18
@@ -673,9 +673,9 @@ def test_progress_credit_gives_each_choice_the_metres_its_walk_bought():
     returns = np.array([1.0 + gamma * 1.0, 1.0, -1.0])  # discounted progress from each choice on
     expected = np.zeros(6)
     expected[[0, 2, 4]] = (returns - returns.mean()) / (returns - returns.mean()).std()
-    np.testing.assert_allclose(train_goal.choice_advantages(samples, "progress", gamma), expected)
+    np.testing.assert_allclose(credit.choice_advantages(samples, "progress", gamma), expected)
     # The episode credit shares one success bit, minus the node's mean, among all steps of the episode.
-    np.testing.assert_allclose(train_goal.choice_advantages(samples, "episode", gamma), [0.5] * 4 + [-0.5] * 2)
+    np.testing.assert_allclose(credit.choice_advantages(samples, "episode", gamma), [0.5] * 4 + [-0.5] * 2)
     with pytest.raises(ValueError, match="credit 'value'"):
         dataclasses.replace(train_goal.PRESETS["tiny"], credit="value")
     with pytest.raises(ValueError, match="credit_gamma 1.5"):

@@ -51,6 +51,7 @@ import torch.nn.functional as F
 
 from leaps_mj.environment import goal_teacher, map_navigation, mapping, roomnav
 from leaps_mj.learning import checkpoints, goal_policy, nets, training_env
+from leaps_mj.learning import credit as credit_lib
 from leaps_mj.learning import trainer as trainer_lib
 from leaps_mj.world import dataset as dataset_lib
 from leaps_mj.world import files
@@ -59,9 +60,6 @@ from leaps_mj.world import rooms
 
 #: The learner's arithmetic (``GoalTrainConfig.precision``): float32, or bfloat16 CPU autocast.
 PRECISIONS = ("fp32", "bf16")
-
-#: How ``reinforce`` credits a goal choice (``GoalTrainConfig.credit``; see :func:`choice_advantages`).
-CREDITS = ("episode", "progress")
 
 #: The goal teachers by name (``GoalTrainConfig.teacher``).
 TEACHERS = {"geodesic": goal_teacher.TeacherGoals, "observable": goal_teacher.ObservableTeacherGoals,
@@ -131,7 +129,7 @@ class GoalTrainConfig:
         probability before the round's update (0: the plain policy gradient, unbounded; session 25 saw
         it blow up within one round of 1,200 episodes at lr 1e-3: the log-probability of failed goals is pushed
         towards minus infinity).
-      credit: How ``reinforce`` credits a goal choice (:func:`choice_advantages`): ``episode``, the
+      credit: How ``reinforce`` credits a goal choice (:func:`leaps_mj.learning.credit.choice_advantages`): ``episode``, the
         episode's success shared by all of its choices, or ``progress``, the geodesic metres towards the
         target walked while the choice and those after it drove, discounted by ``credit_gamma`` per
         choice (a privileged signal used only in training, so each choice is credited for what it bought).
@@ -222,8 +220,8 @@ class GoalTrainConfig:
             raise ValueError(f"precision {self.precision!r}: expected 'fp32' or 'bf16'")
         if self.method not in ("dagger", "reinforce"):
             raise ValueError(f"method {self.method!r}: expected 'dagger' or 'reinforce'")
-        if self.credit not in CREDITS:
-            raise ValueError(f"credit {self.credit!r}: expected one of {CREDITS}")
+        if self.credit not in credit_lib.CREDITS:
+            raise ValueError(f"credit {self.credit!r}: expected one of {credit_lib.CREDITS}")
         if not 0.0 <= self.min_start_distance < self.max_start_distance:
             raise ValueError(f"min_start_distance {self.min_start_distance!r}: expected a value in "
                              f"[0, max_start_distance={self.max_start_distance!r})")
@@ -355,43 +353,6 @@ def collect(config: GoalTrainConfig, houses_dir: str, seed: int, episodes: int, 
     if config.potential:
         samples["potential"] = np.asarray(potentials, np.int8).reshape(-1, mapping.WINDOW, mapping.WINDOW)
     return samples
-
-
-def _node_means(values: np.ndarray, node: np.ndarray) -> np.ndarray:
-    """The mean of ``values`` over the entries of each graph node (0 for a node with none): the baseline."""
-    return np.array([values[node == n].mean() if (node == n).any() else 0.0 for n in range(len(rooms.GRAPH_NODES))])
-
-
-def choice_advantages(samples: dict[str, np.ndarray], credit: str, gamma: float) -> np.ndarray:
-    """Each sample's advantage for the policy gradient of ``reinforce`` (0 where no goal was chosen).
-
-    ``episode``: the episode's success minus the mean success of the episodes of its node, shared by
-    every choice of the episode (one bit for all of them). ``progress``: choice ``j`` of an episode
-    drove from its step to the next choice's (the last one to the end); its return is
-    ``sum_k gamma**k * progress[j + k]``, the geodesic metres towards the target walked under it and
-    the choices after it, and the advantage is that return minus the mean return of its node's
-    choices in the round, divided by the standard deviation of all of them. The distances come from
-    the simulator: privileged, used only as the training signal.
-    """
-    if credit == "episode":
-        node_of = np.zeros(len(samples["success"]), np.int64)
-        node_of[samples["episode"]] = samples["node"]
-        won = samples["success"].astype(np.float64)
-        return (won - _node_means(won, node_of)[node_of])[samples["episode"]]
-    chosen = np.flatnonzero(samples["choice"] >= 0)
-    returns = np.zeros(len(samples["choice"]))
-    for episode in np.unique(samples["episode"][chosen]):
-        steps = chosen[samples["episode"][chosen] == episode]
-        after = np.append(samples["distance"][steps[1:]], samples["final_distance"][episode])
-        progress = samples["distance"][steps].astype(np.float64) - after
-        running = 0.0
-        for k in range(len(steps) - 1, -1, -1):
-            running = progress[k] + gamma * running
-            returns[steps[k]] = running
-    node = samples["node"][chosen]
-    advantage = np.zeros_like(returns)
-    advantage[chosen] = returns[chosen] - _node_means(returns[chosen], node)[node]
-    return advantage / max(float(advantage[chosen].std()) if len(chosen) else 0.0, 1e-6)
 
 
 def _bits(config: GoalTrainConfig, samples: dict[str, np.ndarray], idx: np.ndarray) -> torch.Tensor | None:
@@ -527,7 +488,7 @@ class GoalTrainer(trainer_lib.Trainer):
         fresh = self._collect()
         collect_seconds = time.perf_counter() - t0
         won = fresh["success"].astype(np.float64)
-        advantage = torch.as_tensor(choice_advantages(fresh, c.credit, c.credit_gamma), dtype=torch.float32)
+        advantage = torch.as_tensor(credit_lib.choice_advantages(fresh, c.credit, c.credit_gamma), dtype=torch.float32)
         rng = np.random.default_rng(c.seed + self.iteration)
         batches = [np.sort(order[start:start + c.batch])
                    for order in [rng.permutation(len(fresh["label"]))] for start in range(0, len(order), c.batch)]
