@@ -1,5 +1,6 @@
 """Tests of the map-goal sub-policy: planner, driver, teacher, network, sub-policy and trainer."""
 
+import csv
 import dataclasses
 import math
 
@@ -696,3 +697,22 @@ def test_min_start_distance_reaches_the_training_episodes(tiny_dataset):
         dataclasses.replace(train_goal.PRESETS["tiny"], min_start_distance=13.0)
     with pytest.raises(ValueError, match="far_fraction 0"):
         dataclasses.replace(train_goal.PRESETS["tiny"], far_fraction=0.0)
+
+
+def test_init_data_trains_a_new_run_on_another_runs_dataset_and_its_own(tiny_dataset, tmp_path):
+    config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=1, episodes=2)
+    source = train_goal.GoalTrainer(config, tmp_path / "source", progress=False)
+    source.train()
+    source_samples = len(np.load(tmp_path / "source" / "data" / "round_000.npz")["label"])
+    continued = train_goal.GoalTrainer(dataclasses.replace(config, init_data=str(tmp_path / "source"), seed=1),
+                                       tmp_path / "continued", progress=False)
+    continued.train()
+    own = len(np.load(tmp_path / "continued" / "data" / "round_000.npz")["label"])
+    rows = list(csv.DictReader(open(tmp_path / "continued" / "progress.csv")))
+    assert int(rows[-1]["samples"]) == source_samples + own and own > 0
+    with pytest.raises(ValueError, match="init_data .*data/round_"):
+        dataclasses.replace(config, init_data=str(tmp_path / "continued" / "data"))
+    wider = train_goal.GoalTrainer(dataclasses.replace(config, init_data=str(tmp_path / "source"), context=True),
+                                   tmp_path / "wider", progress=False)
+    with pytest.raises(ValueError, match="round_000.npz: holds samples"):
+        wider.train()

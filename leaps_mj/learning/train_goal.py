@@ -135,6 +135,9 @@ class GoalTrainConfig:
         choice (a privileged signal used only in training, so each choice is credited for what it bought).
       credit_gamma: Discount per later goal choice of the ``progress`` credit.
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
+      init_data: Another DAgger run's folder whose aggregated dataset (its ``data/round_*.npz``) a new run
+        starts from ("": none): its learner trains on those samples and its own rounds', so a continuation
+        adds to what the other run learned from instead of replacing it.
       temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
         argmax the sub-policy acts with).
       bc_coef: Weight of the cross-entropy to the teacher's goals in ``reinforce``.
@@ -181,6 +184,7 @@ class GoalTrainConfig:
     teacher: str = "geodesic"
     method: str = "dagger"
     init_from: str = ""
+    init_data: str = ""
     temperature: float = 0.5
     bc_coef: float = 0.5
     clip: float = 0.2
@@ -243,6 +247,8 @@ class GoalTrainConfig:
         if self.potential and self.method == "reinforce":
             raise ValueError("potential True with method 'reinforce': policy-gradient fine-tuning trains the goal "
                              "logits only; expected potential False")
+        if self.init_data and not sorted(pathlib.Path(self.init_data, "data").glob("round_*.npz")):
+            raise ValueError(f"init_data {self.init_data!r}: expected a goal run's folder holding data/round_*.npz")
         for name in ("lr", "max_start_distance", "temperature"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
@@ -464,12 +470,20 @@ class GoalTrainer(trainer_lib.Trainer):
         self.model.load_state_dict(model.state_dict())
 
     def _dataset(self, fresh: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Every round's samples so far, this round's (``fresh``) last: earlier rounds are read from
-        disk once (after a resume), then kept in memory."""
+        """Every round's samples so far (``init_data``'s first), this round's (``fresh``) last: earlier rounds
+        are read from disk once (after a resume), then kept in memory."""
         keys = (("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
                 + (("potential",) if self.config.potential else ()))
         if self._data is None:
-            parts = [np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
+            initial = (sorted(pathlib.Path(self.config.init_data, "data").glob("round_*.npz"))
+                       if self.config.init_data else [])
+            parts = [np.load(path) for path in initial] + [
+                np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
+            parts = [{k: part[k] for k in keys if k in part} for part in parts]
+            for path, part in zip(initial, parts):
+                if any(k not in part or part[k].shape[1:] != fresh[k].shape[1:] for k in keys):
+                    raise ValueError(f"init_data {path}: holds samples { {k: v.shape[1:] for k, v in part.items()} }, "
+                                     f"expected this run's { {k: fresh[k].shape[1:] for k in keys} }")
             self._data = {k: np.concatenate([p[k] for p in parts]) if parts else fresh[k][:0] for k in keys}
         self._data = {k: np.concatenate([self._data[k], fresh[k]]) for k in keys}
         return self._data
