@@ -315,9 +315,11 @@ def test_the_shipped_map_goal_network_its_mu_s_and_controller_load_and_act_at_12
     controller = baselines.ControllerAgent.from_checkpoint(policy, path)
     env = leaps_mj.load(str(tiny_dataset), "train", seed=0, width=120, height=90, horizon=8)
     try:
-        cpu = train_goal.PRESETS["cpu"]  # the shipped network and μ_s are both the cpu preset's (session 22)
+        cpu = train_goal.PRESETS["cpu"]  # μ_s is the cpu preset's (session 22); the shipped network continues a
+        assert mu_s.metadata["round"] == cpu.rounds  # cpu-preset network on a cpu-preset run's dataset (session 27)
+        assert policy.metadata["train_config"]["init_data"] and policy.metadata["train_config"]["seed"] == 1
         for shipped in (policy, mu_s):
-            assert shipped.metadata["round"] == cpu.rounds and shipped.net.config.goal_head == cpu.goal_head
+            assert shipped.net.config == dataclasses.replace(cpu, room_bits=shipped.net.config.room_bits).net_config
             assert (shipped.width, shipped.height) == (40, 30)
             ts = env.reset()
             shipped.reset(env.episode.target)
