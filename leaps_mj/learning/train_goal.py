@@ -129,9 +129,9 @@ class GoalTrainConfig:
         probability before the round's update (0: the plain policy gradient, unbounded; session 25 saw
         it blow up within one round of 1,200 episodes at lr 1e-3: the log-probability of failed goals is pushed
         towards minus infinity).
-      credit: How ``reinforce`` credits a goal choice (:func:`leaps_mj.learning.credit.choice_advantages`): ``episode``, the
-        episode's success shared by all of its choices, or ``progress``, the geodesic metres towards the
-        target walked while the choice and those after it drove, discounted by ``credit_gamma`` per
+      credit: How ``reinforce`` credits a goal choice (:func:`leaps_mj.learning.credit.choice_advantages`):
+        ``episode``, the episode's success shared by all of its choices, or ``progress``, the geodesic metres
+        towards the target walked while the choice and those after it drove, discounted by ``credit_gamma`` per
         choice (a privileged signal used only in training, so each choice is credited for what it bought).
       credit_gamma: Discount per later goal choice of the ``progress`` credit.
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
@@ -247,11 +247,16 @@ class GoalTrainConfig:
         if self.potential and self.method == "reinforce":
             raise ValueError("potential True with method 'reinforce': policy-gradient fine-tuning trains the goal "
                              "logits only; expected potential False")
-        if self.init_data and not sorted(pathlib.Path(self.init_data, "data").glob("round_*.npz")):
+        if self.init_data and not saved_rounds(self.init_data):
             raise ValueError(f"init_data {self.init_data!r}: expected a goal run's folder holding data/round_*.npz")
         for name in ("lr", "max_start_distance", "temperature"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
+
+
+def saved_rounds(run: str | os.PathLike) -> list[pathlib.Path]:
+    """The DAgger rounds a goal run's folder holds on disk (``data/round_*.npz``), in round order."""
+    return sorted(pathlib.Path(run, "data").glob("round_*.npz"))
 
 
 PRESETS = {
@@ -475,8 +480,7 @@ class GoalTrainer(trainer_lib.Trainer):
         keys = (("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
                 + (("potential",) if self.config.potential else ()))
         if self._data is None:
-            initial = (sorted(pathlib.Path(self.config.init_data, "data").glob("round_*.npz"))
-                       if self.config.init_data else [])
+            initial = saved_rounds(self.config.init_data) if self.config.init_data else []
             parts = [np.load(path) for path in initial] + [
                 np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
             parts = [{k: part[k] for k in keys if k in part} for part in parts]
