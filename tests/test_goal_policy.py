@@ -705,15 +705,18 @@ def test_init_data_trains_a_new_run_on_another_runs_dataset_and_its_own(tiny_dat
     config = dataclasses.replace(train_goal.PRESETS["tiny"], dataset=str(tiny_dataset), rounds=1, episodes=2)
     source = train_goal.GoalTrainer(config, tmp_path / "source", progress=False)
     source.train()
-    source_samples = len(np.load(tmp_path / "source" / "data" / "round_000.npz")["label"])
-    continued = train_goal.GoalTrainer(dataclasses.replace(config, init_data=str(tmp_path / "source"), seed=1),
+    train_goal.GoalTrainer(dataclasses.replace(config, seed=2), tmp_path / "other", progress=False).train()
+    source_samples = sum(len(np.load(tmp_path / run / "data" / "round_000.npz")["label"])
+                         for run in ("source", "other"))
+    pooled = f"{tmp_path / 'source'},{tmp_path / 'other'}"
+    continued = train_goal.GoalTrainer(dataclasses.replace(config, init_data=pooled, seed=1),
                                        tmp_path / "continued", progress=False)
     continued.train()
     own = len(np.load(tmp_path / "continued" / "data" / "round_000.npz")["label"])
     rows = list(csv.DictReader(open(tmp_path / "continued" / "progress.csv")))
     assert int(rows[-1]["samples"]) == source_samples + own and own > 0
-    with pytest.raises(ValueError, match="init_data .*data/round_"):
-        dataclasses.replace(config, init_data=str(tmp_path / "continued" / "data"))
+    with pytest.raises(ValueError, match="init_data .*continued/data'.*data/round_"):
+        dataclasses.replace(config, init_data=f"{tmp_path / 'source'},{tmp_path / 'continued' / 'data'}")
     wider = train_goal.GoalTrainer(dataclasses.replace(config, init_data=str(tmp_path / "source"), context=True),
                                    tmp_path / "wider", progress=False)
     with pytest.raises(ValueError, match="round_000.npz: holds samples"):

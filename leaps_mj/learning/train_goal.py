@@ -135,9 +135,9 @@ class GoalTrainConfig:
         choice (a privileged signal used only in training, so each choice is credited for what it bought).
       credit_gamma: Discount per later goal choice of the ``progress`` credit.
       init_from: A ``goal.pt`` (or folder holding one) whose weights a new run starts from ("": none).
-      init_data: Another DAgger run's folder whose aggregated dataset (its ``data/round_*.npz``) a new run
-        starts from ("": none): its learner trains on those samples and its own rounds', so a continuation
-        adds to what the other run learned from instead of replacing it.
+      init_data: Other DAgger runs' folders, separated by commas, whose aggregated datasets (their
+        ``data/round_*.npz``) a new run starts from ("": none): its learner trains on those samples and its
+        own rounds', so a continuation adds to what the other runs learned from instead of replacing it.
       temperature: Softmax temperature of the goals sampled by ``reinforce`` (below 1: nearer the
         argmax the sub-policy acts with).
       bc_coef: Weight of the cross-entropy to the teacher's goals in ``reinforce``.
@@ -206,6 +206,11 @@ class GoalTrainConfig:
                                  semantic=self.semantic, room_bits=self.room_bits, potential=self.potential,
                                  decoder=self.decoder, goals=self.goals, goal_head=self.goal_head)
 
+    @property
+    def init_runs(self) -> tuple[str, ...]:
+        """The folders ``init_data`` names, in order."""
+        return tuple(run for run in self.init_data.split(",") if run)
+
     def __post_init__(self):
         for name in ("workers", "rounds", "episodes", "epochs", "batch", "horizon", "max_start_doors",
                      "width", "height"):
@@ -247,8 +252,9 @@ class GoalTrainConfig:
         if self.potential and self.method == "reinforce":
             raise ValueError("potential True with method 'reinforce': policy-gradient fine-tuning trains the goal "
                              "logits only; expected potential False")
-        if self.init_data and not saved_rounds(self.init_data):
-            raise ValueError(f"init_data {self.init_data!r}: expected a goal run's folder holding data/round_*.npz")
+        for run in self.init_runs:
+            if not saved_rounds(run):
+                raise ValueError(f"init_data {run!r}: expected a goal run's folder holding data/round_*.npz")
         for name in ("lr", "max_start_distance", "temperature"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} {getattr(self, name)!r}: expected a positive number")
@@ -480,7 +486,7 @@ class GoalTrainer(trainer_lib.Trainer):
         keys = (("maps", "node", "label") + (("bits",) if self.config.room_bits else ())
                 + (("potential",) if self.config.potential else ()))
         if self._data is None:
-            initial = saved_rounds(self.config.init_data) if self.config.init_data else []
+            initial = [path for run in self.config.init_runs for path in saved_rounds(run)]
             parts = [np.load(path) for path in initial] + [
                 np.load(self.data_dir / f"round_{k:03d}.npz") for k in range(self.iteration)]
             parts = [{k: part[k] for k in keys if k in part} for part in parts]
