@@ -122,6 +122,23 @@ def test_classifier_bits_replaces_only_the_semantic_bits(tiny_dataset, spec):
         plain.close()
 
 
+@pytest.mark.parametrize("truth", ["and", "or"])
+def test_classifier_bits_combined_with_the_truth(tiny_dataset, spec, truth):
+    env, alone = make_env(tiny_dataset), make_env(tiny_dataset)
+    combined, plain = classifier.ClassifierBits(env, FakeClassifier(), truth=truth), classifier.ClassifierBits(
+        alone, FakeClassifier())
+    try:
+        for ts, ref in ((combined.reset_to(spec), plain.reset_to(spec)),
+                        *((combined.step(a), plain.step(a)) for a in (0, 3, 1, 8, 0))):
+            cnn, gt = ref.observation["semantic"], np.asarray(env.task.bits, np.uint8)
+            np.testing.assert_array_equal(ts.observation["semantic"], cnn & gt if truth == "and" else cnn | gt)
+        with pytest.raises(ValueError, match="truth 'xor'"):
+            classifier.ClassifierBits(env, FakeClassifier(), truth="xor")
+    finally:
+        combined.close()
+        plain.close()
+
+
 def test_classifier_bits_needs_pixels(tiny_dataset):
     env = leaps_mj.load(str(tiny_dataset), "test", width=40, height=30, pixels=False)
     try:

@@ -233,3 +233,34 @@ def test_the_default_sub_policy_is_the_shipped_map_goal_one_and_shipped_folders_
     assert isinstance(policy_folder.load("goal_cpu"), goal_policy.GoalSubPolicy)
     assert policy_folder.controller_path("goal_cpu") == goal_policy.DEFAULT_DIR / policy_folder.CONTROLLER
     assert policy_folder.controller_path("cpu") == policy_folder.baselines.DEFAULT_CONTROLLER
+
+
+def test_fig6_bits_tool_runs_the_ablations_on_a_draw_of_the_source_episodes(load_tool, tiny_dataset, tmp_path, capsys):
+    """tools/fig6_bits.py: reuses the source's leaps / leaps-cnn rows on its draw, runs the two ablations there,
+    pairs every classifier agent with the ground truth and the ablations with the classifier."""
+    source, out = tmp_path / "source", tmp_path / "ablation"
+    assert evaluate.main(["--agent", "leaps", "leaps-cnn", "--dataset", str(tiny_dataset), "--split", "test",
+                          "--horizon", "20", "--out", str(source), "--limit", "6", "--prior", "reference",
+                          "--subpolicy", "local", "--no-progress"]) == 0
+    tool = load_tool("fig6_bits")
+    rows = evaluate.read_rows(evaluate.csv_path(source, "leaps"))
+    lengths = sorted({r["plan_length"] for r in rows})
+    argv = ["--source", str(source), "--out", str(out), "--lengths", *map(str, lengths), "--workers", "1"]
+    assert tool.main(argv + ["--per-length", "1", "--fp-episodes", "2"]) == 0
+    counts = json.loads((out / "false_positives.json").read_text())
+    assert counts["episodes"] == 2 and counts["steps"] > 0 and counts["same_as_evaluation"]
+    assert counts["false_positives"] >= counts["neighbour_type"] >= counts["target_type_next_door"]
+    assert counts["target_type"] >= counts["target_type_next_door"]
+    picked = tool.subset(rows, 1, lengths, 0)
+    assert len(picked) == len(lengths)
+    for label in tool.AGENTS:
+        assert [r["episode"] for r in evaluate.read_rows(evaluate.csv_path(out, label))] == picked
+    for label in tool.REUSED:
+        kept = [r for r in evaluate.read_rows(evaluate.csv_path(source, label)) if r["episode"] in picked]
+        assert evaluate.read_rows(evaluate.csv_path(out, label)) == kept
+    text = (out / "results.md").read_text()
+    for a, b in (("leaps-cnn", "leaps"), ("leaps-cnn-and-truth", "leaps"), ("leaps-cnn-or-truth", "leaps-cnn")):
+        assert f"## Paired: {a} against {b} on the same episodes" in text
+    capsys.readouterr()
+    assert tool.main(argv + ["--per-length", "99", "--out", str(tmp_path / "other")]) == 2
+    assert "99 asked for" in capsys.readouterr().err

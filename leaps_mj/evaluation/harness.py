@@ -82,8 +82,10 @@ class AgentSpec:
       rule: LEAPS observation rule ("paper" or "release").
       psi_obs: LEAPS observation noise (psi_obs0, psi_obs1) overriding the
         prior file's, or None.
-      bits: where the semantic bits come from: "truth" (the house geometry)
-        or "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier).
+      bits: where the semantic bits come from (a key of :data:`BITS`): "truth" (the house geometry),
+        "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier), or, to tell which
+        of the classifier's errors move LEAPS, "classifier-and-truth" (its bits that the truth
+        confirms) and "classifier-or-truth" (its bits and the truth's).
     """
 
     label: str
@@ -93,6 +95,10 @@ class AgentSpec:
     bits: str = "truth"
 
 
+#: Sources of the semantic bits (``AgentSpec.bits``): None for the environment's ground truth, else
+#: the ``truth`` mode of :class:`leaps_mj.learning.classifier.ClassifierBits`.
+BITS = {"truth": None, "classifier": "classifier", "classifier-and-truth": "and", "classifier-or-truth": "or"}
+
 #: Agents selectable with ``--agent``.
 AGENTS = {
     "random": AgentSpec("random", "random"),
@@ -100,6 +106,8 @@ AGENTS = {
     "leaps": AgentSpec("leaps", "leaps", rule="paper"),
     "leaps-release": AgentSpec("leaps-release", "leaps", rule="release"),
     "leaps-cnn": AgentSpec("leaps-cnn", "leaps", rule="paper", bits="classifier"),
+    "leaps-cnn-and-truth": AgentSpec("leaps-cnn-and-truth", "leaps", rule="paper", bits="classifier-and-truth"),
+    "leaps-cnn-or-truth": AgentSpec("leaps-cnn-or-truth", "leaps", rule="paper", bits="classifier-or-truth"),
     "controller": AgentSpec("controller", "controller"),
     "aug": AgentSpec("aug", "aug"),
     "oracle": AgentSpec("oracle", "oracle"),
@@ -269,12 +277,14 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     """Runs one agent on a chunk of episode indices, in a worker."""
     spec, indices = job
     config, env, specs = _WORKER["config"], _WORKER["env"], _WORKER["specs"]
-    if spec.bits == "classifier":
-        if "classifier_env" not in _WORKER:
+    if spec.bits != "truth":
+        key = f"env_{spec.bits}"
+        if key not in _WORKER:
             from leaps_mj.learning import classifier
 
-            _WORKER["classifier_env"] = classifier.ClassifierBits(env)
-        env = _WORKER["classifier_env"]
+            mode = BITS[spec.bits]
+            _WORKER[key] = classifier.ClassifierBits(env, truth=None if mode == "classifier" else mode)
+        env = _WORKER[key]
     rows = []
     for i in indices:
         agent = _build_agent(spec, episodes_lib.episode_seed(config.seed, i))

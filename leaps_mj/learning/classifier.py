@@ -41,6 +41,10 @@ CONSECUTIVE = 3
 NUM_VIEWS = 4
 #: Index of the room type classified from the last frames rather than the panorama.
 OUTDOOR = rooms.room_index("outdoor")
+#: How :class:`ClassifierBits` may combine its bits with the ground truth, for the ablations that
+#: explain Fig. 6: None (the classifier alone), "and" (its bits the truth confirms: false positives
+#: dropped) or "or" (its bits and the truth: misses filled in).
+TRUTH_MODES = (None, "and", "or")
 #: The shipped classifier (cpu preset, 40x30 views).
 DEFAULT_PATH = rooms.DATA_DIR / "classifier" / "cpu.pt"
 #: The command that trains it.
@@ -200,15 +204,23 @@ class ClassifierBits(dm_env.Environment):
       env: a :class:`leaps_mj.environment.roomnav.RoomNavEnvironment` rendering pixels.
       model: a :class:`RoomTypeClassifier` (default: the shipped one).
       threshold, steps: the filter's confidence and run length.
+      truth: one of :data:`TRUTH_MODES`: None for the classifier's bits; "and" or "or" combine them
+        with the task's ground-truth bits (diagnostic: which of the classifier's errors move LEAPS).
+
+    Raises:
+      ValueError: for an environment without pixels or an unknown ``truth``.
 
     Attributes:
       probabilities: the classifier's probabilities (K,) at the last time step.
     """
 
     def __init__(self, env, model: RoomTypeClassifier | None = None, threshold: float = CONFIDENCE,
-                 steps: int = CONSECUTIVE):
+                 steps: int = CONSECUTIVE, truth: str | None = None):
         if not env.config.pixels:
             raise ValueError("ClassifierBits needs an environment rendering pixels (pixels=True)")
+        if truth not in TRUTH_MODES:
+            raise ValueError(f"truth {truth!r}: expected one of {list(TRUTH_MODES)}")
+        self.truth = truth
         self._env = env
         self.model = model if model is not None else RoomTypeClassifier.load()
         self.filter = BitFilter(threshold, steps)
@@ -232,7 +244,12 @@ class ClassifierBits(dm_env.Environment):
         frames = tuple(np.stack([f[i] for f in self._frames]) for i in range(2))
         self.probabilities = self.model.probabilities(panorama(self._env), frames)
         obs = collections.OrderedDict(obs)
-        obs["semantic"] = self.filter.update(self.probabilities)
+        bits = self.filter.update(self.probabilities)
+        if self.truth == "and":
+            bits &= np.asarray(self._env.task.bits, np.uint8)
+        elif self.truth == "or":
+            bits |= np.asarray(self._env.task.bits, np.uint8)
+        obs["semantic"] = bits
         return ts._replace(observation=obs)
 
     def reset(self) -> dm_env.TimeStep:
