@@ -82,8 +82,8 @@ class AgentSpec:
       rule: LEAPS observation rule ("paper" or "release").
       psi_obs: LEAPS observation noise (psi_obs0, psi_obs1) overriding the
         prior file's, or None.
-      bits: where the semantic bits come from (a key of :data:`BITS`): "truth" (the house geometry),
-        "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier), or, to tell which
+      bits: where the semantic bits come from: "truth" (the house geometry) or a key of
+        :data:`CLASSIFIER_BITS`: "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier), or, to tell which
         of the classifier's errors move LEAPS, "classifier-and-truth" (its bits that the truth
         confirms) and "classifier-or-truth" (its bits and the truth's).
     """
@@ -95,9 +95,9 @@ class AgentSpec:
     bits: str = "truth"
 
 
-#: Sources of the semantic bits (``AgentSpec.bits``): None for the environment's ground truth, else
-#: the ``truth`` mode of :class:`leaps_mj.learning.classifier.ClassifierBits`.
-BITS = {"truth": None, "classifier": "classifier", "classifier-and-truth": "and", "classifier-or-truth": "or"}
+#: The classifier's bit sources (``AgentSpec.bits`` other than "truth"), each with its ``truth`` mode of
+#: :class:`leaps_mj.learning.classifier.ClassifierBits`.
+CLASSIFIER_BITS = {"classifier": None, "classifier-and-truth": "and", "classifier-or-truth": "or"}
 
 #: Agents selectable with ``--agent``.
 AGENTS = {
@@ -277,13 +277,12 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     """Runs one agent on a chunk of episode indices, in a worker."""
     spec, indices = job
     config, env, specs = _WORKER["config"], _WORKER["env"], _WORKER["specs"]
-    if spec.bits != "truth":
+    if spec.bits in CLASSIFIER_BITS:
         key = f"env_{spec.bits}"
         if key not in _WORKER:
             from leaps_mj.learning import classifier
 
-            mode = BITS[spec.bits]
-            _WORKER[key] = classifier.ClassifierBits(env, truth=None if mode == "classifier" else mode)
+            _WORKER[key] = classifier.ClassifierBits(env, truth=CLASSIFIER_BITS[spec.bits])
         env = _WORKER[key]
     rows = []
     for i in indices:
