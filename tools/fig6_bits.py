@@ -60,18 +60,20 @@ class FalsePositives:
         self.counts = {"steps": 0, "steps_with_false_positive": 0, "false_positives": 0, "neighbour_type": 0,
                        "target_type": 0, "target_type_next_door": 0}
         self._task = self._target = None
+        self._near: dict[int, set[str]] = {}  # room id -> the types of the rooms one door from it
 
     def begin(self, env, spec, agent) -> None:
         del agent
         self._task, self._target = env.task, rooms.room_index(spec.target)
+        house = env.task.house_model.house
+        types = {room.id: room.type for room in house.rooms}
+        self._near = {room.id: {types[r] for door in house.doors if room.id in door.rooms for r in door.rooms
+                                if r != room.id} for room in house.rooms}
 
     def step(self, timestep, action, info) -> None:
         del action, info
-        house = self._task.house_model.house
         false = np.asarray(timestep.observation["semantic"], bool) & ~np.asarray(self._task.bits, bool)
-        here = self._task.house_model.room_at(timestep.observation["pose"][:2])
-        types = {room.id: room.type for room in house.rooms}
-        near = {types[r] for door in house.doors if here in door.rooms for r in door.rooms if r != here}
+        near = self._near.get(self._task.house_model.room_at(timestep.observation["pose"][:2]), set())
         c = self.counts
         c["steps"] += 1
         c["steps_with_false_positive"] += bool(false.any())
@@ -128,10 +130,11 @@ def main(argv=None) -> int:
                 raise ValueError(f"{harness.csv_path(args.source, label)}: no rows; expected a finished {label} run")
         indices = subset(source["leaps"], args.per_length, args.lengths, args.seed)
         args.out.mkdir(parents=True, exist_ok=True)
+        drawn = set(indices)
         for label, rows in source.items():
             path = harness.csv_path(args.out, label)
             if not path.exists():
-                harness.append_rows(path, [r for r in rows if r["episode"] in set(indices)])
+                harness.append_rows(path, [r for r in rows if r["episode"] in drawn])
         table = harness.run(config, [harness.AGENTS[a] for a in AGENTS], indices, args.out, workers=args.workers)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)

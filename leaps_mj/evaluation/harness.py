@@ -83,9 +83,9 @@ class AgentSpec:
       psi_obs: LEAPS observation noise (psi_obs0, psi_obs1) overriding the
         prior file's, or None.
       bits: where the semantic bits come from: "truth" (the house geometry) or a key of
-        :data:`CLASSIFIER_BITS`: "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier), or, to tell which
-        of the classifier's errors move LEAPS, "classifier-and-truth" (its bits that the truth
-        confirms) and "classifier-or-truth" (its bits and the truth's).
+        :data:`CLASSIFIER_BITS`: "classifier" (the CNN room-type classifier, leaps_mj.learning.classifier),
+        or, to tell which of the classifier's errors move LEAPS, "classifier-and-truth" (its bits that
+        the truth confirms) and "classifier-or-truth" (its bits and the truth's).
     """
 
     label: str
