@@ -119,6 +119,29 @@ def test_results_do_not_depend_on_workers(tiny_dataset, tmp_path):
             (tmp_path / "two" / f"episodes_{label}.csv").read_bytes()
 
 
+def test_run_observed_repeats_the_evaluation_with_an_observer(tiny_dataset, tmp_path):
+    """harness.run_observed: the rows the evaluation wrote, with the observer called on every step."""
+
+    class Steps:
+        def __init__(self):
+            self.begun, self.steps, self.ended = 0, 0, 0
+
+        def begin(self, env, spec, agent):
+            self.begun += 1
+
+        def step(self, timestep, action, info):
+            self.steps += 1
+
+        def end(self, result):
+            self.ended += 1
+
+    config = evaluate.EvalConfig(dataset=str(tiny_dataset), split="test", horizon=40)
+    rows = evaluate.run(config, [evaluate.AGENTS["leaps"]], [1, 2], tmp_path / "eval", progress=False)["leaps"]
+    observer = Steps()
+    assert evaluate.run_observed(config, evaluate.AGENTS["leaps"], [1, 2], observer) == rows
+    assert observer.begun == observer.ended == 2 and observer.steps == sum(r["steps"] for r in rows)
+
+
 def test_casestudy_draws_the_episode(tiny_dataset, tmp_path, capsys):
     from leaps_mj.evaluation import casestudy
 

@@ -26,11 +26,7 @@ import sys
 
 import numpy as np
 
-from leaps_mj.environment import episodes as episodes_lib
-from leaps_mj.environment import roomnav
-from leaps_mj.evaluation import harness, registry, stats
-from leaps_mj.learning import classifier, policy_folder
-from leaps_mj.planning import agents as agents_lib
+from leaps_mj.evaluation import harness, stats
 from leaps_mj.world import files, rooms
 
 #: The agents compared: ground truth, the classifier, and the two ablations.
@@ -90,24 +86,12 @@ class FalsePositives:
 def false_positives(config: harness.EvalConfig, indices, rows: list[dict]) -> dict:
     """:class:`FalsePositives` counts of ``leaps-cnn`` (paper rule) run on ``indices`` as the harness runs it,
     and whether every episode took the steps its row in ``rows`` (the harness's run) records."""
-    env = classifier.ClassifierBits(roomnav.load(config.dataset, config.split, seed=config.seed, reward="sparse",
-                                                 horizon=config.horizon))
-    specs = episodes_lib.load_split(config.dataset, config.split, config.episodes)
-    subpolicy = policy_folder.load(config.policy_dir, config.temperature) if config.subpolicy == "learned" else None
-    model = agents_lib.load_model(config.prior)
-    observer, recorded, same = FalsePositives(), {r["episode"]: r for r in rows}, True
-    try:
-        for i in indices:
-            seed = episodes_lib.episode_seed(config.seed, i)
-            if subpolicy is not None:
-                subpolicy.seed(seed)
-            agent = registry.make_agent("leaps", env, subpolicy=subpolicy, seed=seed, model=model, rule="paper",
-                                        replan_every=config.replan_every)
-            result = episodes_lib.run_episode(env, agent, specs[i], config.horizon, observer=observer)
-            same &= (result["steps"], result["success_step"]) == (recorded[i]["steps"], recorded[i]["success_step"])
-    finally:
-        env.close()
-    return {"episodes": len(indices), "same_as_evaluation": bool(same), **observer.counts}
+    observer = FalsePositives()
+    observed = harness.run_observed(config, harness.AGENTS["leaps-cnn"], indices, observer)
+    recorded = {r["episode"]: r for r in rows}
+    same = all((r["steps"], r["success_step"]) == (recorded[r["episode"]]["steps"], recorded[r["episode"]]["success_step"])
+               for r in observed)
+    return {"episodes": len(indices), "same_as_evaluation": same, **observer.counts}
 
 
 def main(argv=None) -> int:

@@ -276,6 +276,12 @@ def _observer(label: str):
 def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     """Runs one agent on a chunk of episode indices, in a worker."""
     spec, indices = job
+    return spec, _episode_rows(spec, indices, _observer(spec.label))
+
+
+def _episode_rows(spec: AgentSpec, indices, observer) -> list[dict]:
+    """One agent's CSV rows of the episodes ``indices``, run in this worker with ``observer``
+    (:func:`leaps_mj.environment.episodes.run_episode`'s per-step callback, or None)."""
     config, env, specs = _WORKER["config"], _WORKER["env"], _WORKER["specs"]
     if spec.bits in CLASSIFIER_BITS:
         key = f"env_{spec.bits}"
@@ -287,9 +293,25 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
     rows = []
     for i in indices:
         agent = _build_agent(spec, episodes_lib.episode_seed(config.seed, i))
-        result = episodes_lib.run_episode(env, agent, specs[i], config.horizon, observer=_observer(spec.label))
+        result = episodes_lib.run_episode(env, agent, specs[i], config.horizon, observer=observer)
         rows.append({"episode": i, **{k: result[k] for k in CSV_FIELDS if k != "episode"}})
-    return spec, rows
+    return rows
+
+
+def run_observed(config: EvalConfig, spec: AgentSpec, indices, observer) -> list[dict]:
+    """Runs one agent on the episodes ``indices`` in this process, exactly as :func:`run`'s workers
+    run it (same environment, seeds and agent), with ``observer`` called at every step.
+
+    For diagnostics that watch what an evaluation's agent saw and did
+    (``tools/fig6_bits.py`` counts the room classifier's false positives):
+    the rows it returns equal the evaluation's rows of those episodes, which
+    is how a diagnostic checks that it watched the same episodes.
+    """
+    _init_worker(config, None)
+    try:
+        return _episode_rows(spec, indices, observer)
+    finally:
+        _WORKER.pop("env").close()
 
 
 # -- result files --------------------------------------------------------------
