@@ -280,8 +280,7 @@ def _run_chunk(job) -> tuple[AgentSpec, list[dict]]:
 
 
 def _episode_rows(spec: AgentSpec, indices, observer) -> list[dict]:
-    """One agent's CSV rows of the episodes ``indices``, run in this worker with ``observer``
-    (:func:`leaps_mj.environment.episodes.run_episode`'s per-step callback, or None)."""
+    """One agent's CSV rows of the episodes ``indices``, run in this worker with ``observer`` (or None)."""
     config, env, specs = _WORKER["config"], _WORKER["env"], _WORKER["specs"]
     if spec.bits in CLASSIFIER_BITS:
         key = f"env_{spec.bits}"
@@ -299,14 +298,9 @@ def _episode_rows(spec: AgentSpec, indices, observer) -> list[dict]:
 
 
 def run_observed(config: EvalConfig, spec: AgentSpec, indices, observer) -> list[dict]:
-    """Runs one agent on the episodes ``indices`` in this process, exactly as :func:`run`'s workers
-    run it (same environment, seeds and agent), with ``observer`` called at every step.
-
-    For diagnostics that watch what an evaluation's agent saw and did
-    (``tools/fig6_bits.py`` counts the room classifier's false positives):
-    the rows it returns equal the evaluation's rows of those episodes, which
-    is how a diagnostic checks that it watched the same episodes.
-    """
+    """Runs one agent on the episodes ``indices`` in this process as :func:`run`'s workers do, with
+    ``observer`` called at every step: for diagnostics that watch an evaluation's episodes
+    (``tools/fig6_bits.py``), which check by the rows returned that they watched the same ones."""
     _init_worker(config, None)
     try:
         return _episode_rows(spec, indices, observer)
