@@ -88,9 +88,8 @@ def false_positives(config: harness.EvalConfig, indices, rows: list[dict]) -> di
     and whether every episode took the steps its row in ``rows`` (the harness's run) records."""
     observer = FalsePositives()
     observed = harness.run_observed(config, harness.AGENTS["leaps-cnn"], indices, observer)
-    recorded = {r["episode"]: r for r in rows}
-    same = all((r["steps"], r["success_step"]) == (recorded[r["episode"]]["steps"], recorded[r["episode"]]["success_step"])
-               for r in observed)
+    recorded = {r["episode"]: (r["steps"], r["success_step"]) for r in rows}
+    same = all((r["steps"], r["success_step"]) == recorded[r["episode"]] for r in observed)
     return {"episodes": len(indices), "same_as_evaluation": same, **observer.counts}
 
 
