@@ -269,7 +269,35 @@ def test_hop_visibility_tool_splits_success_by_what_a_turn_shows(load_tool, hop_
     out = capsys.readouterr().out
     assert f"{len(group_of)} hop episodes 1 door(s) away" in out and "| oracle |" in out
     assert tool.main(["--dataset", str(dataset), "--split", "valid", str(tmp_path / "run")]) == 2
-    assert "expected the hop episodes of" in capsys.readouterr().err
+    assert "expected the episodes 'hops' of" in capsys.readouterr().err
+
+
+def test_hop_visibility_tool_groups_by_the_start_room(load_tool, hop_dataset, tmp_path, capsys):
+    """tools/hop_visibility.py --by room / doors: every one-door hop in one group, named by the start room's type or
+    its door count; an unknown grouping is refused."""
+    dataset, eps, _ = hop_dataset
+    tool = load_tool("hop_visibility")
+    models = {hm.house.id: hm for hm in episodes.house_models(str(dataset), "test")}
+    by_room, by_doors = (tool.groups(str(dataset), "test", 1, by) for by in ("room", "doors"))
+    assert set(by_room) == set(by_doors) == {i for i, s in enumerate(eps) if s.plan_length == 1}
+    for i in by_room:
+        hm = models[eps[i].house]
+        room = hm.house.rooms[hm.room_at(eps[i].start[:2])]
+        assert by_room[i] == room.type != eps[i].target
+        doors = sum(room.id in d.rooms for d in hm.house.doors)
+        assert by_doors[i] == (f"{tool.MANY_DOORS}+ doors" if doors >= tool.MANY_DOORS else
+                               "1 door" if doors == 1 else f"{doors} doors")
+    with pytest.raises(ValueError, match="unknown grouping"):
+        tool.groups(str(dataset), "test", 1, "colour")
+    assert hops.main(["--dataset", str(dataset), "--split", "test", "--agent", "oracle", "--out", str(tmp_path / "run"),
+                      "--no-progress"]) == 0
+    capsys.readouterr()
+    assert tool.main(["--dataset", str(dataset), "--split", "test", "--by", "doors", str(tmp_path / "run")]) == 0
+    header = capsys.readouterr().out.splitlines()[2]
+    counts = [int(cell.split()[0].rstrip("+")) for cell in header.split("|")[3:-1]]
+    assert counts == sorted(counts) and len(counts) == len(set(by_doors.values()))
+    assert tool.main(["--dataset", str(dataset), "--split", "test", "--large", str(tmp_path / "run")]) == 2
+    assert "expected the episodes 'hops_large'" in capsys.readouterr().err
 
 
 def test_success_by_the_starts_geodesic_distance_bins_every_start_once():

@@ -1,20 +1,24 @@
-"""Hop success split by whether the target can be seen from the start by turning on the spot.
+"""Hop success split by the start: what a turn on the spot shows, the start room's type, or its doors.
 
-``python tools/hop_visibility.py --dataset roomnav-v2 --split test FOLDER [FOLDER ...]``
+``python tools/hop_visibility.py --dataset roomnav-v2 --split test [--large] [--by view|room|doors] FOLDER ...``
 
-For every one-door hop episode (``--distance`` to change) it turns the camera through a full circle
-at the start position (12 headings, 30° apart, nothing else moves) and notes whether any see-object
-of the target's type (the pixels the see test counts) comes into view. Then, for each hop result
-folder given (written by ``python -m leaps_mj.evaluation.hops``, on the same dataset and split), it
-prints each agent's success within ``--horizon`` steps on the episodes where the target comes into
-view, where it does not, and where the target has no see-objects (``outdoor``, ``indoor``), with 95 %
-Wilson intervals. A learner that perceives the target but cannot act on it fails the first group; one
-that does not explore fails the second.
+With ``--by view`` (the default), for every one-door hop episode (``--distance`` to change) it turns
+the camera through a full circle at the start position (12 headings, 30° apart, nothing else moves)
+and notes whether any see-object of the target's type (the pixels the see test counts) comes into
+view. A learner that perceives the target but cannot act on it fails the episodes where it does; one
+that does not explore fails those where it does not; targets without see-objects (``outdoor``,
+``indoor``) form a third group. ``--by room`` groups the episodes by the type of the room the agent
+starts in (``indoor``: a hallway or other untyped space), ``--by doors`` by how many doors that room
+has: where a learner must choose among many doors it cannot see through, it falls behind a teacher
+that knows the way. Then, for each hop result folder given (written by ``python -m
+leaps_mj.evaluation.hops``, on the same dataset, split and hop set), it prints each agent's success
+within ``--horizon`` steps per group, with 95 % Wilson intervals.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import pathlib
@@ -29,8 +33,12 @@ from leaps_mj.world import rooms
 
 #: Headings of the look around, evenly spaced from the start heading.
 HEADINGS = 12
-#: Groups of episodes, in the printed order.
+#: Groups of episodes by what a turn shows, in the printed order.
 GROUPS = ("target comes into view", "target never in view", "no see-objects")
+#: The ways of grouping the episodes.
+SPLITS = ("view", "room", "doors")
+#: Start rooms with at least this many doors form one group.
+MANY_DOORS = 5
 
 
 def in_view_on_turning(env, spec) -> bool:
@@ -47,28 +55,54 @@ def in_view_on_turning(env, spec) -> bool:
     return False
 
 
-def groups(dataset: str, split: str, distance: int) -> dict[int, str]:
-    """Episode index (in the split's hop file) -> its group, for the hops ``distance`` doors away."""
-    specs = episodes_lib.load_split(dataset, split, "hops")
+def groups(dataset: str, split: str, distance: int, by: str = "view", kind: str = "hops") -> dict[int, str]:
+    """Episode index (in the split's hop file ``kind``) -> its group, for the hops ``distance`` doors away.
+
+    Raises:
+      ValueError: for an unknown ``by``.
+    """
+    if by not in SPLITS:
+        raise ValueError(f"unknown grouping {by!r}; expected one of {list(SPLITS)}")
+    specs = [(i, s) for i, s in enumerate(episodes_lib.load_split(dataset, split, kind)) if s.plan_length == distance]
+    if by != "view":
+        models = {hm.house.id: hm for hm in episodes_lib.house_models(dataset, split)}
+        return {i: _start_room(models[s.house], s.start, by) for i, s in specs}
     env = roomnav.load(dataset, split, width=40, height=30)
     try:
         return {i: (GROUPS[2] if not rooms.SEE_OBJECTS.get(s.target)
-                    else GROUPS[0] if in_view_on_turning(env, s) else GROUPS[1])
-                for i, s in enumerate(specs) if s.plan_length == distance}
+                    else GROUPS[0] if in_view_on_turning(env, s) else GROUPS[1]) for i, s in specs}
     finally:
         env.close()
 
 
-def _check_folder(folder: pathlib.Path, dataset: str, split: str) -> list[pathlib.Path]:
-    """The folder's per-agent CSVs, after checking that it ran this split's hop episodes."""
+def _start_room(hm, start, by: str) -> str:
+    """The group of a start by its room: the room's type (``room``) or how many doors it has (``doors``)."""
+    room = hm.room_at(start[:2])
+    if by == "room":
+        return hm.house.rooms[room].type
+    doors = sum(room in door.rooms for door in hm.house.doors)
+    return f"{MANY_DOORS}+ doors" if doors >= MANY_DOORS else f"{doors} door" + "s" * (doors != 1)
+
+
+def _order(by: str, sizes: collections.Counter) -> list[str]:
+    """The printed order of the groups: as listed (``view``), by door count (``doors``), largest first (``room``)."""
+    if by == "view":
+        return list(GROUPS)
+    if by == "doors":
+        return sorted(sizes, key=lambda g: int(g.split()[0].rstrip("+")))
+    return sorted(sizes, key=lambda g: (-sizes[g], g))
+
+
+def _check_folder(folder: pathlib.Path, dataset: str, split: str, kind: str) -> list[pathlib.Path]:
+    """The folder's per-agent CSVs, after checking that it ran this split's hop episodes ``kind``."""
     config_path = folder / "config.json"
     if not config_path.is_file():
         raise ValueError(f"{str(folder)!r} holds no config.json: expected a folder written by "
                          "python -m leaps_mj.evaluation.hops")
     config = json.loads(config_path.read_text())
     ran = (pathlib.Path(str(config.get("dataset"))).name, config.get("split"), config.get("episodes"))
-    if ran != (pathlib.Path(dataset).name, split, "hops"):
-        raise ValueError(f"{str(folder)!r} ran {ran}; expected the hop episodes of {dataset} / {split}")
+    if ran != (pathlib.Path(dataset).name, split, kind):
+        raise ValueError(f"{str(folder)!r} ran {ran}; expected the episodes {kind!r} of {dataset} / {split}")
     return sorted(folder.glob("episodes_*.csv"))
 
 
@@ -79,28 +113,33 @@ def main(argv=None) -> int:
     parser.add_argument("--split", default="test")
     parser.add_argument("--distance", type=int, default=1, help="doors from the target (1 or 2)")
     parser.add_argument("--horizon", type=int, default=60, help="success within this many steps")
+    parser.add_argument("--by", choices=SPLITS, default="view",
+                        help="group by what a turn at the start shows, the start room's type, or its doors")
+    parser.add_argument("--large", action="store_true", help="the large hop set (python -m leaps_mj.evaluation.hops --large)")
     args = parser.parse_args(argv)
     if args.distance not in episodes_lib.HOP_DISTANCES or args.horizon < 1:
         parser.error(f"--distance {args.distance}, --horizon {args.horizon}: expected a distance in "
                      f"{list(episodes_lib.HOP_DISTANCES)} and a positive horizon")
+    kind = "hops_large" if args.large else "hops"
     try:
         csvs = [(folder, path) for folder in map(pathlib.Path, args.folders)
-                for path in _check_folder(folder, args.dataset, args.split)]
-        group_of = groups(args.dataset, args.split, args.distance)
+                for path in _check_folder(folder, args.dataset, args.split, kind)]
+        group_of = groups(args.dataset, args.split, args.distance, args.by, kind)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    sizes = {g: sum(v == g for v in group_of.values()) for g in GROUPS}
+    sizes = collections.Counter(group_of.values())
+    order = _order(args.by, sizes)
     print(f"{len(group_of)} hop episodes {args.distance} door(s) away ({args.dataset} / {args.split}); "
           f"success within {args.horizon} steps\n")
-    print("| run | agent | " + " | ".join(f"{g} (n = {sizes[g]})" for g in GROUPS) + " |")
-    print("|---|---|" + "---|" * len(GROUPS))
+    print("| run | agent | " + " | ".join(f"{g} (n = {sizes[g]})" for g in order) + " |")
+    print("|---|---|" + "---|" * len(order))
     for folder, path in csvs:
         rows = [r for r in harness.read_rows(path) if int(r["episode"]) in group_of]
         ok = stats.success_at(rows, args.horizon)
         of = np.array([group_of[int(r["episode"])] for r in rows])
         cells = []
-        for g in GROUPS:
+        for g in order:
             k, n = int(ok[of == g].sum()), int((of == g).sum())
             low, high = stats.wilson(k, n)
             cells.append(f"{100 * k / n:.1f}% [{100 * low:.1f}, {100 * high:.1f}]" if n else "–")
