@@ -76,11 +76,17 @@ def groups(dataset: str, split: str, distance: int, by: str = "view", kind: str 
 
 
 def _start_room(hm, start, by: str) -> str:
-    """The group of a start by its room: the room's type (``room``) or how many doors it has (``doors``)."""
-    room = hm.room_at(start[:2])
+    """The group of a start by its room: the room's type (``room``) or how many doors it has (``doors``).
+
+    Raises:
+      ValueError: for a start in no room of the house.
+    """
+    room = {r.id: r for r in hm.house.rooms}.get(hm.room_at(start[:2]))
+    if room is None:
+        raise ValueError(f"start {tuple(start)} lies in no room of house {hm.house.id}")
     if by == "room":
-        return hm.house.rooms[room].type
-    doors = sum(room in door.rooms for door in hm.house.doors)
+        return room.type
+    doors = sum(room.id in door.rooms for door in hm.house.doors)
     return f"{MANY_DOORS}+ doors" if doors >= MANY_DOORS else f"{doors} door" + "s" * (doors != 1)
 
 
