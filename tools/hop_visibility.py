@@ -86,7 +86,11 @@ def _start_room(hm, start, by: str) -> str:
         raise ValueError(f"start {tuple(start)} lies in no room of house {hm.house.id}")
     if by == "room":
         return room.type
-    doors = sum(room.id in door.rooms for door in hm.house.doors)
+    return _doors_group(sum(room.id in door.rooms for door in hm.house.doors))
+
+
+def _doors_group(doors: int) -> str:
+    """The name of the group of start rooms with ``doors`` doors."""
     return f"{MANY_DOORS}+ doors" if doors >= MANY_DOORS else f"{doors} door" + "s" * (doors != 1)
 
 
@@ -95,7 +99,7 @@ def _order(by: str, sizes: collections.Counter) -> list[str]:
     if by == "view":
         return list(GROUPS)
     if by == "doors":
-        return sorted(sizes, key=lambda g: int(g.split()[0].rstrip("+")))
+        return [g for g in map(_doors_group, range(MANY_DOORS + 1)) if g in sizes]
     return sorted(sizes, key=lambda g: (-sizes[g], g))
 
 
