@@ -219,6 +219,13 @@ def test_goal_sub_policy_loads_acts_and_refuses_other_checkpoints(tmp_path, env)
         policy.act(env.reset())
     with pytest.raises(ValueError, match="no sub-policy for target"):
         policy.reset("attic")
+    policy.reset("kitchen")
+    assert policy.goal is None  # no goal chosen yet
+    policy.act(env.reset())
+    goal = policy.goal
+    assert goal.shape == (2,) and np.all(np.isfinite(goal))
+    goal += 100.0  # a copy: the driver's goal does not move
+    assert np.allclose(policy.goal, goal - 100.0)
 
     def run():
         ts = env.reset_to(spec)

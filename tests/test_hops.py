@@ -313,3 +313,35 @@ def test_success_by_the_starts_geodesic_distance_bins_every_start_once():
     assert [(r["n"], r["successes"]) for r in out["pure"]["1"].values()] == [(2, 1), (1, 1), (1, 0)]
     assert out["pure"]["2"]["5-10 m"]["successes"] == 0  # 70 steps is past the horizon
     assert out["oracle"]["1"][">= 15 m"]["successes"] == 1
+
+
+def test_hop_paths_tool_draws_the_runs_the_folder_records(load_tool, hop_dataset, tmp_path, capsys):
+    """tools/hop_paths.py: the drawn episodes are a seeded draw of those asked for, each re-run with the steps the
+    folder records and the map-goal goals it chose; a folder whose runs the sub-policy no longer takes is refused."""
+    dataset, eps, _ = hop_dataset
+    tool = load_tool("hop_paths")
+    run = tmp_path / "run"
+    assert _main(dataset, run, "--agent", "pure", "--policy-dir", str(goal_policy.DEFAULT_DIR), "--nodes", "kitchen",
+                 "bedroom") == 0
+    capsys.readouterr()
+    config = tool.folder_config(run, "hops", None)
+    rows = harness.read_rows(run / "episodes_pure.csv")
+    group_of = {r["episode"]: "any" for r in rows if r["plan_length"] == 1}
+    picked = tool.choose(rows, group_of, None, "all", 60, 2, seed=0)
+    assert picked == tool.choose(rows, group_of, None, "all", 60, 2, seed=0) and len(picked) == 2
+    assert set(picked) <= set(group_of)
+    runs = tool.trace(config, "pure", picked, {r["episode"]: r for r in rows})
+    for i in picked:
+        recorded = next(r for r in rows if r["episode"] == i)
+        assert len(runs[i]["poses"]) == recorded["steps"] + 1 and runs[i]["goals"]
+        assert np.allclose(runs[i]["poses"][0], eps[i].start, atol=1e-6)
+    out = tmp_path / "paths.png"
+    assert tool.main([str(run), "--outcome", "all", "--count", "2", "--horizon", "20", "--out", str(out)]) == 0
+    assert out.stat().st_size > 20_000 and "wrote" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="no failed episode starts in a room of type 'attic'"):
+        tool.choose(rows, group_of, "attic", "failed", 60, 2, seed=0)
+    shifted = [{**r, "steps": r["steps"] + 1} if r["episode"] == picked[0] else r for r in rows]
+    with pytest.raises(ValueError, match=f"episode {picked[0]} ran .* the folder records"):
+        tool.trace(config, "pure", picked, {r["episode"]: r for r in shifted})
+    assert tool.main([str(run), "--large", "--out", str(out)]) == 2
+    assert "expected the episodes 'hops_large'" in capsys.readouterr().err

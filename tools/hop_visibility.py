@@ -103,7 +103,7 @@ def _order(by: str, sizes: collections.Counter) -> list[str]:
     return sorted(sizes, key=lambda g: (-sizes[g], g))
 
 
-def _check_folder(folder: pathlib.Path, dataset: str, split: str, kind: str) -> list[pathlib.Path]:
+def check_folder(folder: pathlib.Path, dataset: str, split: str, kind: str) -> list[pathlib.Path]:
     """The folder's per-agent CSVs, after checking that it ran this split's hop episodes ``kind``."""
     config_path = folder / "config.json"
     if not config_path.is_file():
@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     kind = "hops_large" if args.large else "hops"
     try:
         csvs = [(folder, path) for folder in map(pathlib.Path, args.folders)
-                for path in _check_folder(folder, args.dataset, args.split, kind)]
+                for path in check_folder(folder, args.dataset, args.split, kind)]
         group_of = groups(args.dataset, args.split, args.distance, args.by, kind)
     except ValueError as e:
         print(f"error: {e}", file=sys.stderr)

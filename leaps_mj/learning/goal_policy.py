@@ -108,6 +108,13 @@ class GoalSubPolicy:
         self._drivers: dict[str, map_navigation.GoalDriver] = {}
         self._driver: map_navigation.GoalDriver | None = None
 
+    @property
+    def goal(self):
+        """World (x, y) of the goal the current run heads for, a copy (None before its first choice)."""
+        if self._driver is None or self._driver.goal is None:
+            return None
+        return self._driver.goal.copy()
+
     def seed(self, seed: int) -> None:
         """Restarts the planner's unsticking moves from ``seed`` at the next :meth:`reset`."""
         self._seed = seed
