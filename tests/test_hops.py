@@ -1,6 +1,7 @@
 """Tests for the hop benchmark: the hop episodes, the paired test and ``python -m leaps_mj.evaluation.hops``."""
 
 import csv
+import dataclasses
 import json
 import shutil
 
@@ -289,6 +290,20 @@ def test_hop_visibility_tool_groups_by_the_start_room(load_tool, hop_dataset, tm
                                "1 door" if doors == 1 else f"{doors} doors")
     with pytest.raises(ValueError, match="unknown grouping"):
         tool.groups(str(dataset), "test", 1, "colour")
+    # --by way: turned to face its door on the way, a start has it ahead; turned away, behind; across, beside.
+    by_way = tool.groups(str(dataset), "test", 1, "way")
+    assert set(by_way) == set(by_room) and set(by_way.values()) <= set(tool.WAY_GROUPS)
+    for i in list(by_way)[:4]:
+        hm, (x, y, _) = models[eps[i].house], eps[i].start
+        room = hm.room_at((x, y))
+        door = min((d for d in hm.house.doors if room in d.rooms and any(
+            hm.house.rooms[r].type == eps[i].target for r in d.rooms if r != room)),
+            key=lambda d: np.hypot(d.center[0] - x, d.center[1] - y))
+        near = "≤ 3 m" if np.hypot(door.center[0] - x, door.center[1] - y) <= tool.NEAR_DOOR else "> 3 m"
+        facing = np.arctan2(door.center[1] - y, door.center[0] - x)
+        for turn, where in ((0.0, "ahead"), (np.pi / 2, "side"), (np.pi, "behind")):
+            spec = dataclasses.replace(eps[i], start=(x, y, facing + turn))
+            assert tool._start_room(hm, spec, "way") == f"{where}, {near}"
     assert hops.main(["--dataset", str(dataset), "--split", "test", "--agent", "oracle", "--out", str(tmp_path / "run"),
                       "--no-progress"]) == 0
     capsys.readouterr()

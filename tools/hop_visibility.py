@@ -1,6 +1,6 @@
-"""Hop success split by the start: what a turn on the spot shows, the start room's type, or its doors.
+"""Hop success split by the start: what a turn on the spot shows, the start room's type, its doors, or where its door on the way lies.
 
-``python tools/hop_visibility.py --dataset roomnav-v2 --split test [--large] [--by view|room|doors] FOLDER ...``
+``python tools/hop_visibility.py --dataset roomnav-v2 --split test [--large] [--by view|room|doors|way] FOLDER ...``
 
 With ``--by view`` (the default), for every one-door hop episode (``--distance`` to change) it turns
 the camera through a full circle at the start position (12 headings, 30° apart, nothing else moves)
@@ -10,7 +10,9 @@ that does not explore fails those where it does not; targets without see-objects
 ``indoor``) form a third group. ``--by room`` groups the episodes by the type of the room the agent
 starts in (``indoor``: a hallway or other untyped space), ``--by doors`` by how many doors that room
 has: where a learner must choose among many doors it cannot see through, it falls behind a teacher
-that knows the way. Then, for each hop result folder given (written by ``python -m
+that knows the way. ``--by way`` groups them by the nearest door of the start room that leads on to
+the target: whether it lies ahead of the start heading (within 45°), to the side or behind (beyond
+135°), and whether within 3 m; a door beside the agent is out of the first frame. Then, for each hop result folder given (written by ``python -m
 leaps_mj.evaluation.hops``, on the same dataset, split and hop set), it prints each agent's success
 within ``--horizon`` steps per group, with 95 % Wilson intervals.
 """
@@ -36,9 +38,16 @@ HEADINGS = 12
 #: Groups of episodes by what a turn shows, in the printed order.
 GROUPS = ("target comes into view", "target never in view", "no see-objects")
 #: The ways of grouping the episodes.
-SPLITS = ("view", "room", "doors")
+SPLITS = ("view", "room", "doors", "way")
 #: Start rooms with at least this many doors form one group.
 MANY_DOORS = 5
+#: Metres within which the door on the way counts as near (``--by way``).
+NEAR_DOOR = 3.0
+#: Degrees from the start heading beyond which the door on the way lies to the side, and behind.
+SIDE, BEHIND = 45.0, 135.0
+#: Groups of ``--by way``, in the printed order.
+WAY_GROUPS = tuple(f"{where}, {near}" for near in (f"≤ {NEAR_DOOR:g} m", f"> {NEAR_DOOR:g} m")
+                   for where in ("ahead", "side", "behind"))
 
 
 def in_view_on_turning(env, spec) -> bool:
@@ -66,7 +75,7 @@ def groups(dataset: str, split: str, distance: int, by: str = "view", kind: str 
     specs = [(i, s) for i, s in enumerate(episodes_lib.load_split(dataset, split, kind)) if s.plan_length == distance]
     if by != "view":
         models = {hm.house.id: hm for hm in episodes_lib.house_models(dataset, split)}
-        return {i: _start_room(models[s.house], s.start, by) for i, s in specs}
+        return {i: _start_room(models[s.house], s, by) for i, s in specs}
     env = roomnav.load(dataset, split, width=40, height=30)
     try:
         return {i: (GROUPS[2] if not rooms.SEE_OBJECTS.get(s.target)
@@ -75,18 +84,33 @@ def groups(dataset: str, split: str, distance: int, by: str = "view", kind: str 
         env.close()
 
 
-def _start_room(hm, start, by: str) -> str:
-    """The group of a start by its room: the room's type (``room``) or how many doors it has (``doors``).
+def _start_room(hm, spec, by: str) -> str:
+    """The group of an episode's start by its room: the room's type (``room``), how many doors it has
+    (``doors``), or where its nearest door on the way to the target lies (``way``).
 
     Raises:
       ValueError: for a start in no room of the house.
     """
-    room = {r.id: r for r in hm.house.rooms}.get(hm.room_at(start[:2]))
+    room = {r.id: r for r in hm.house.rooms}.get(hm.room_at(spec.start[:2]))
     if room is None:
-        raise ValueError(f"start {tuple(start)} lies in no room of house {hm.house.id}")
+        raise ValueError(f"start {tuple(spec.start)} lies in no room of house {hm.house.id}")
     if by == "room":
         return room.type
-    return _doors_group(sum(room.id in door.rooms for door in hm.house.doors))
+    doors = [door for door in hm.house.doors if room.id in door.rooms]
+    if by == "doors":
+        return _doors_group(len(doors))
+    return _way_group(spec, [door for door in doors if hm.plan_length(
+        next((r for r in door.rooms if r != room.id), room.id), spec.target) == spec.plan_length - 1])
+
+
+def _way_group(spec, way) -> str:
+    """The ``--by way`` group of a start: the bearing and distance of the nearest of the doors ``way``."""
+    x, y, yaw = spec.start
+    door = min(way, key=lambda d: math.hypot(d.center[0] - x, d.center[1] - y))
+    bearing = abs(math.degrees(math.remainder(math.atan2(door.center[1] - y, door.center[0] - x) - yaw, 2 * math.pi)))
+    where = "ahead" if bearing <= SIDE else "side" if bearing < BEHIND else "behind"
+    near = math.hypot(door.center[0] - x, door.center[1] - y) <= NEAR_DOOR
+    return WAY_GROUPS[WAY_GROUPS.index(f"{where}, ≤ {NEAR_DOOR:g} m") + (0 if near else 3)]
 
 
 def _doors_group(doors: int) -> str:
@@ -95,9 +119,11 @@ def _doors_group(doors: int) -> str:
 
 
 def _order(by: str, sizes: collections.Counter) -> list[str]:
-    """The printed order of the groups: as listed (``view``), by door count (``doors``), largest first (``room``)."""
+    """The printed order of the groups: as listed (``view``, ``way``), by door count (``doors``), largest first (``room``)."""
     if by == "view":
         return list(GROUPS)
+    if by == "way":
+        return [g for g in WAY_GROUPS if g in sizes]
     if by == "doors":
         return [g for g in map(_doors_group, range(MANY_DOORS + 1)) if g in sizes]
     return sorted(sizes, key=lambda g: (-sizes[g], g))
@@ -124,7 +150,8 @@ def main(argv=None) -> int:
     parser.add_argument("--distance", type=int, default=1, help="doors from the target (1 or 2)")
     parser.add_argument("--horizon", type=int, default=60, help="success within this many steps")
     parser.add_argument("--by", choices=SPLITS, default="view",
-                        help="group by what a turn at the start shows, the start room's type, or its doors")
+                        help="group by what a turn at the start shows, the start room's type, its doors, or where its "
+                             "door on the way to the target lies")
     parser.add_argument("--large", action="store_true", help="the large hop set (python -m leaps_mj.evaluation.hops --large)")
     args = parser.parse_args(argv)
     if args.distance not in episodes_lib.HOP_DISTANCES or args.horizon < 1:
