@@ -226,6 +226,24 @@ def test_goal_sub_policy_loads_acts_and_refuses_other_checkpoints(tmp_path, env)
     assert goal.shape == (2,) and np.all(np.isfinite(goal))
     goal += 100.0  # a copy: the driver's goal does not move
     assert np.allclose(policy.goal, goal - 100.0)
+    # The map is built afresh every `memory` steps (by default its training runs' horizon); 0 never forgets.
+    assert policy.memory == goal_policy.MEMORY  # a checkpoint without training metadata
+    short = goal_policy.GoalSubPolicy(tmp_path, memory=3)
+    short.reset("kitchen")
+    ts = env.reset()
+    for _ in range(3):
+        ts = env.step(short.act(ts))
+    assert short._driver.steps == 3 and short._driver.mapper.grid[mapping.CHANNELS.index("visited")].sum() >= 1
+    ts = env.step(short.act(ts))
+    assert short._driver.steps == 1  # forgotten before the 4th step, then one step taken
+    fresh = goal_policy.GoalSubPolicy(tmp_path, memory=0)
+    fresh.reset("kitchen")
+    ts = env.reset()
+    for _ in range(5):
+        ts = env.step(fresh.act(ts))
+    assert fresh._driver.steps == 5
+    with pytest.raises(ValueError, match="memory -1: expected a non-negative"):
+        goal_policy.GoalSubPolicy(tmp_path, memory=-1)
 
     def run():
         ts = env.reset_to(spec)

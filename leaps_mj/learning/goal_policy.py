@@ -41,6 +41,9 @@ from leaps_mj.world import rooms
 GOAL = "goal.pt"
 #: Folder of the shipped map-goal network (cpu preset, 40x30 maps).
 DEFAULT_DIR = rooms.DATA_DIR / "policies" / "goal_cpu"
+#: Steps of a run after which the map is built afresh, for a network whose metadata does not name the
+#: horizon of its training runs (:class:`GoalSubPolicy`'s ``memory``).
+MEMORY = 60
 #: The command that trains it (session 19's recipe, 2.2 h on 2 cores; docs/training.md).
 TRAIN_COMMAND = (f"python -m leaps_mj.train goal --preset cpu --threads 2 && cp runs/goal/{GOAL} {DEFAULT_DIR}/")
 
@@ -89,19 +92,37 @@ def load_goal_net(path: str | os.PathLike, width: int | None = None,
 class GoalSubPolicy:
     """The map-goal sub-policy behind the sub-policy interface, for every graph node.
 
+    The network was trained on runs of at most ``horizon`` steps from an empty map. Over longer runs the map
+    fills with what it never saw in training (long trails of visited cells, rooms mapped hundreds of steps
+    before), and it loops within a few metres: on the 1,000 test episodes, run alone, it reached 51 % at
+    H = 1000 and 49 % at H = 300 (session 33, docs/training.md). So every ``memory`` steps of a run the map is
+    forgotten and built afresh from the next frame, as at the start of a run. Runs no longer than that (the hop
+    benchmark's 60 steps, LEAPS's windows of 30) are unchanged.
+
     Args:
       path: A ``goal.pt`` written by ``python -m leaps_mj.train goal`` (or a folder holding one).
       seed: Seed of the planner's unsticking moves.
+      memory: Steps of a run after which its map is built afresh. None: the horizon of the network's
+        training runs (its metadata's ``train_config``, else :data:`MEMORY`). 0: never.
 
     Attributes:
       width, height: Frame resolution the network's maps are built from;
         frames of an integer multiple of it are subsampled.
       targets: The graph nodes it serves (all of them).
+      memory: As the argument, resolved.
+
+    Raises:
+      ValueError: for a negative ``memory``, or as :func:`load_goal_net`.
     """
 
-    def __init__(self, path: str | os.PathLike, seed: int = 0):
+    def __init__(self, path: str | os.PathLike, seed: int = 0, memory: int | None = None):
         path = pathlib.Path(path)
         self.net, self.metadata = load_goal_net(path / GOAL if path.is_dir() else path)
+        if memory is None:
+            memory = int(self.metadata.get("train_config", {}).get("horizon", MEMORY))
+        if isinstance(memory, bool) or not isinstance(memory, int) or memory < 0:
+            raise ValueError(f"memory {memory!r}: expected a non-negative number of steps (0: never forget)")
+        self.memory = memory
         self.width, self.height = self.net.config.width, self.net.config.height
         self.targets = rooms.GRAPH_NODES
         self._seed = seed
@@ -144,6 +165,8 @@ class GoalSubPolicy:
         """
         if self._driver is None:
             raise ValueError("call reset(target) before act()")
+        if self.memory and self._driver.steps >= self.memory:
+            self._driver.reset()  # a fresh map; the unsticking moves' random stream goes on
         window = self._driver.observe(timestep.observation)
         if self._driver.needs_goal():
             bits = timestep.observation["semantic"] if self.net.config.room_bits else None
