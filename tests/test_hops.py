@@ -295,9 +295,9 @@ def test_hop_visibility_tool_groups_by_the_start_room(load_tool, hop_dataset, tm
     assert set(by_way) == set(by_room) and set(by_way.values()) <= set(tool.WAY_GROUPS)
     for i in list(by_way)[:4]:
         hm, (x, y, _) = models[eps[i].house], eps[i].start
-        room = hm.room_at((x, y))
+        room, types = hm.room_at((x, y)), {r.id: r.type for r in hm.house.rooms}
         door = min((d for d in hm.house.doors if room in d.rooms and any(
-            hm.house.rooms[r].type == eps[i].target for r in d.rooms if r != room)),
+            types[r] == eps[i].target for r in d.rooms if r != room)),
             key=lambda d: np.hypot(d.center[0] - x, d.center[1] - y))
         near = "≤ 3 m" if np.hypot(door.center[0] - x, door.center[1] - y) <= tool.NEAR_DOOR else "> 3 m"
         facing = np.arctan2(door.center[1] - y, door.center[0] - x)

@@ -17,6 +17,7 @@ per episode: the house around the start, the sub-policy's path (blue) and the go
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
@@ -75,7 +76,7 @@ def folder_config(folder: pathlib.Path, kind: str, policy_dir: str | None) -> ha
         raise ValueError(f"{str(folder)!r} holds no episodes_pure.csv: expected a hop run of the agent 'pure'")
     config = harness.EvalConfig(**{**harness.LATER_FIELDS, **saved})
     if policy_dir is not None:
-        config = harness.EvalConfig(**{**config.__dict__, "policy_dir": policy_dir})
+        config = dataclasses.replace(config, policy_dir=policy_dir)
     return config
 
 

@@ -45,9 +45,8 @@ MANY_DOORS = 5
 NEAR_DOOR = 3.0
 #: Degrees from the start heading beyond which the door on the way lies to the side, and behind.
 SIDE, BEHIND = 45.0, 135.0
-#: Groups of ``--by way``, in the printed order.
-WAY_GROUPS = tuple(f"{where}, {near}" for near in (f"≤ {NEAR_DOOR:g} m", f"> {NEAR_DOOR:g} m")
-                   for where in ("ahead", "side", "behind"))
+#: Where the door on the way can lie from the start heading (``--by way``).
+BEARINGS = ("ahead", "side", "behind")
 
 
 def in_view_on_turning(env, spec) -> bool:
@@ -106,11 +105,19 @@ def _start_room(hm, spec, by: str) -> str:
 def _way_group(spec, way) -> str:
     """The ``--by way`` group of a start: the bearing and distance of the nearest of the doors ``way``."""
     x, y, yaw = spec.start
-    door = min(way, key=lambda d: math.hypot(d.center[0] - x, d.center[1] - y))
+    distance, door = min(((math.hypot(d.center[0] - x, d.center[1] - y), d) for d in way), key=lambda t: t[0])
     bearing = abs(math.degrees(math.remainder(math.atan2(door.center[1] - y, door.center[0] - x) - yaw, 2 * math.pi)))
-    where = "ahead" if bearing <= SIDE else "side" if bearing < BEHIND else "behind"
-    near = math.hypot(door.center[0] - x, door.center[1] - y) <= NEAR_DOOR
-    return WAY_GROUPS[WAY_GROUPS.index(f"{where}, ≤ {NEAR_DOOR:g} m") + (0 if near else 3)]
+    where = BEARINGS[0] if bearing <= SIDE else BEARINGS[1] if bearing < BEHIND else BEARINGS[2]
+    return _way_name(where, distance <= NEAR_DOOR)
+
+
+def _way_name(where: str, near: bool) -> str:
+    """The name of the ``--by way`` group of doors lying ``where`` from the start heading, near or not."""
+    return f"{where}, {'≤' if near else '>'} {NEAR_DOOR:g} m"
+
+
+#: Groups of ``--by way``, in the printed order.
+WAY_GROUPS = tuple(_way_name(where, near) for near in (True, False) for where in BEARINGS)
 
 
 def _doors_group(doors: int) -> str:
