@@ -196,16 +196,20 @@ def test_bad_backend_options_are_usage_errors(tiny_dataset, tmp_path, capsys, ex
         evaluate.run(evaluate.EvalConfig(), [], [], tmp_path / "x", backend="dask")
 
 
-def test_leaps_prior_defaults_by_subpolicy(tiny_dataset, tmp_path):
-    """Without --prior, LEAPS gets the shipped prior tuned for its sub-policy: one matrix, two noises."""
+def test_leaps_prior_and_n_default_by_subpolicy(tiny_dataset, tmp_path):
+    """Without --prior / --replan-every, LEAPS gets the shipped prior and N tuned for its sub-policy: one matrix,
+    two noises; the paper's N = 30 for the local expert, a longer one for the map-goal network; given, they win."""
     local, learned = (agents.load_model(agents.SUBPOLICY_PRIORS[k]) for k in ("local", "learned"))
     np.testing.assert_array_equal(local.prior, learned.prior)
     assert learned.psi_obs1 > local.psi_obs1, "failures of the learned sub-policies say less about connectivity"
+    assert agents.SUBPOLICY_REPLAN_EVERY == {"local": 30, "learned": 60}
     for subpolicy, name in agents.SUBPOLICY_PRIORS.items():
         out = tmp_path / subpolicy
         assert evaluate.main(["--agent", "leaps", "--dataset", str(tiny_dataset), "--split", "test", "--horizon", "5",
                               "--out", str(out), "--limit", "1", "--no-progress", "--subpolicy", subpolicy]) == 0
-        assert json.loads((out / "config.json").read_text())["prior"] == name
+        config = json.loads((out / "config.json").read_text())
+        assert (config["prior"], config["replan_every"]) == (name, agents.SUBPOLICY_REPLAN_EVERY[subpolicy])
+    assert agents.subpolicy_defaults("learned", "reference", 45) == ("reference", 45)
 
 
 def test_temperature_is_a_learned_subpolicy_option_left_out_of_config_json_at_one():

@@ -100,11 +100,12 @@ def main(argv=None) -> int:
     p.add_argument("--prior", default=None,
                    help=f"LEAPS prior (default: by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
     p.add_argument("--rule", choices=agents_lib.RULES, default="paper")
-    p.add_argument("--replan-every", type=int, default=30)
+    p.add_argument("--replan-every", type=int, default=None,
+                   help=f"LEAPS's N (default: by sub-policy, {agents_lib.SUBPOLICY_REPLAN_EVERY})")
     p.add_argument("--subpolicy", choices=["local", "learned"], default="local")
     p.add_argument("--seed", type=int, default=0, help="evaluation seed (agent seed of episode K derives from it)")
     args = p.parse_args(argv)
-    args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
+    args.prior, args.replan_every = agents_lib.subpolicy_defaults(args.subpolicy, args.prior, args.replan_every)
     try:
         specs = episodes_lib.load_split(args.dataset, args.split)
         if not 0 <= args.episode < len(specs):

@@ -650,7 +650,7 @@ def main(argv=None) -> int:
     p.add_argument("--prior", default=None,
                    help="LEAPS prior: a shipped name (cpu, cpu_learned), 'reference', or a JSON path (default: "
                         f"by sub-policy, {agents_lib.SUBPOLICY_PRIORS})")
-    p.add_argument("--replan-every", type=int, default=30, help="LEAPS's N")
+    p.add_argument("--replan-every", type=int, help=f"LEAPS's N (default: {agents_lib.SUBPOLICY_REPLAN_EVERY})")
     p.add_argument("--temperature", type=float, default=1.0,
                    help="sampling temperature of the learned sub-policies' actions (1: as trained)")
     p.add_argument("--policy-dir", default=None,
@@ -673,7 +673,7 @@ def main(argv=None) -> int:
         p.error(f"--horizon {args.horizon}: expected positive integers")
     where = backends.from_arguments(p, args)
     args.policy_dir = command_line_policy_dir(args.subpolicy, args.policy_dir)
-    args.prior = args.prior or agents_lib.SUBPOLICY_PRIORS[args.subpolicy]
+    args.prior, args.replan_every = agents_lib.subpolicy_defaults(args.subpolicy, args.prior, args.replan_every)
     try:
         config = EvalConfig(dataset=args.dataset, split=args.split, horizon=horizons[-1], subpolicy=args.subpolicy,
                             prior=args.prior, replan_every=args.replan_every, seed=args.seed,

@@ -38,11 +38,13 @@ from leaps_mj.world import rooms
 #: Shipped priors, by name: ``leaps_mj/data/prior_<name>.json``.
 #: The prior the LEAPS agent uses unless told otherwise.
 DEFAULT_PRIOR = "cpu"
-#: The shipped prior the commands give LEAPS with each kind of sub-policy: the same learned
-#: connectivity, with the observation noise tuned on the validation episodes for that sub-policy
-#: (``python -m leaps_mj.train obs-noise --subpolicy local|learned``): ψ_obs reflects how reliable the
-#: sub-policies are (results/obs_noise_learned_v2.md).
+#: The shipped prior the commands give LEAPS with each kind of sub-policy: the same learned connectivity, with
+#: the observation noise tuned on the validation episodes for that sub-policy (``python -m leaps_mj.train
+#: obs-noise --subpolicy local|learned``): ψ_obs reflects how reliable the sub-policies are.
 SUBPOLICY_PRIORS = {"local": DEFAULT_PRIOR, "learned": "cpu_learned"}
+#: LEAPS's N the commands use with each kind of sub-policy, tuned on the validation episodes beside ψ_obs
+#: (docs/training.md, session 34): the paper's 30 for the local expert, 60 for the map-goal network.
+SUBPOLICY_REPLAN_EVERY = {"local": 30, "learned": 60}
 #: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.planning.semantic.SemanticModel`).
 RULES = ("paper", "release")
 #: Steps after which the local expert gives up on an exploration goal.
@@ -374,6 +376,12 @@ class Replan:
     belief: np.ndarray
     n_pos: np.ndarray
     n_neg: np.ndarray
+
+
+def subpolicy_defaults(subpolicy: str, prior: str | None = None, replan_every: int | None = None) -> tuple[str, int]:
+    """LEAPS's prior and N for ``subpolicy`` ("local" or "learned"), each where not given (None)."""
+    return (prior or SUBPOLICY_PRIORS[subpolicy],
+            SUBPOLICY_REPLAN_EVERY[subpolicy] if replan_every is None else replan_every)
 
 
 def current_nodes(bits) -> list[int]:
