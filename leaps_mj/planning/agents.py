@@ -43,7 +43,8 @@ DEFAULT_PRIOR = "cpu"
 #: obs-noise --subpolicy local|learned``): ψ_obs reflects how reliable the sub-policies are.
 SUBPOLICY_PRIORS = {"local": DEFAULT_PRIOR, "learned": "cpu_learned"}
 #: LEAPS's N the commands use with each kind of sub-policy, tuned on the validation episodes beside ψ_obs
-#: (docs/training.md, session 34): the paper's 30 for the local expert, 60 for the map-goal network.
+#: (docs/training.md, session 34; results/obs_noise_goal_mem60_v2.md): the paper's 30 for the local expert, 60 for
+#: the map-goal network.
 SUBPOLICY_REPLAN_EVERY = {"local": 30, "learned": 60}
 #: Observation rules of :class:`LeapsAgent` (see :class:`leaps_mj.planning.semantic.SemanticModel`).
 RULES = ("paper", "release")
